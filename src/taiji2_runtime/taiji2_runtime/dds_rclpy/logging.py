@@ -1,0 +1,81 @@
+"""rclpy.logging subset: named loggers printing in the rcutils console format to stderr."""
+
+from __future__ import annotations
+
+import sys
+import time
+from enum import IntEnum
+from typing import Any
+
+
+class LoggingSeverity(IntEnum):
+    """rclpy.logging.LoggingSeverity."""
+
+    UNSET = 0
+    DEBUG = 10
+    INFO = 20
+    WARN = 30
+    ERROR = 40
+    FATAL = 50
+
+
+_default_level = LoggingSeverity.INFO
+_levels: dict[str, LoggingSeverity] = {}
+
+
+def set_default_level(level: str | LoggingSeverity) -> None:
+    """Default severity threshold (from ``--log-level``)."""
+    global _default_level
+    _default_level = level if isinstance(level, LoggingSeverity) else LoggingSeverity[str(level).upper()]
+
+
+class RcutilsLogger:
+    """A named logger: ``[LEVEL] [seconds.nanoseconds] [name]: message`` on stderr."""
+
+    def __init__(self, name: str = "") -> None:
+        self.name = name
+
+    def get_child(self, name: str) -> RcutilsLogger:
+        return RcutilsLogger(f"{self.name}.{name}" if self.name else name)
+
+    def set_level(self, level: LoggingSeverity) -> None:
+        _levels[self.name] = LoggingSeverity(level)
+
+    def get_effective_level(self) -> LoggingSeverity:
+        return _levels.get(self.name, _default_level)
+
+    def is_enabled_for(self, severity: LoggingSeverity) -> bool:
+        return severity >= self.get_effective_level()
+
+    def log(self, message: Any, severity: LoggingSeverity, **_kwargs: Any) -> bool:
+        if not self.is_enabled_for(severity):
+            return False
+        ns = time.time_ns()
+        print(
+            f"[{severity.name}] [{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}] [{self.name}]: {message}",
+            file=sys.stderr,
+            flush=True,
+        )
+        return True
+
+    def debug(self, message: Any, **kwargs: Any) -> bool:
+        return self.log(message, LoggingSeverity.DEBUG, **kwargs)
+
+    def info(self, message: Any, **kwargs: Any) -> bool:
+        return self.log(message, LoggingSeverity.INFO, **kwargs)
+
+    def warning(self, message: Any, **kwargs: Any) -> bool:
+        return self.log(message, LoggingSeverity.WARN, **kwargs)
+
+    warn = warning
+
+    def error(self, message: Any, **kwargs: Any) -> bool:
+        return self.log(message, LoggingSeverity.ERROR, **kwargs)
+
+    def fatal(self, message: Any, **kwargs: Any) -> bool:
+        return self.log(message, LoggingSeverity.FATAL, **kwargs)
+
+
+def get_logger(name: str) -> RcutilsLogger:
+    """rclpy.logging.get_logger."""
+    return RcutilsLogger(name)

@@ -1,0 +1,54 @@
+"""rclpy.subscription.Subscription over a Cyclone DDS DataReader."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
+from cyclonedds.sub import DataReader
+
+from .qos import QoSProfile
+
+
+class Subscription:
+    """Delivers messages of one type on one topic to ``callback`` from an executor."""
+
+    def __init__(
+        self,
+        reader: DataReader,
+        msg_type: type,
+        topic_name: str,
+        callback: Callable[[Any], Any],
+        qos_profile: QoSProfile,
+    ) -> None:
+        self._reader: DataReader | None = reader
+        self.msg_type = msg_type
+        self._topic_name = topic_name
+        self.callback = callback
+        self.qos_profile = qos_profile
+        self.read_condition = ReadCondition(reader, SampleState.NotRead | ViewState.Any | InstanceState.Any)
+
+    @property
+    def topic_name(self) -> str:
+        return self._topic_name
+
+    @property
+    def handle(self) -> DataReader:
+        if self._reader is None:
+            raise RuntimeError(f"subscription on {self._topic_name} is destroyed")
+        return self._reader
+
+    def get_publisher_count(self) -> int:
+        return self.handle.get_subscription_matched_status().current_count
+
+    def take(self, max_samples: int) -> list[Any]:
+        """Up to ``max_samples`` received messages, oldest first (invalid/dispose samples skipped)."""
+        if self._reader is None:
+            return []
+        return [m for m in self._reader.take(N=max_samples) if isinstance(m, self.msg_type)]
+
+    def destroy(self) -> None:
+        reader, self._reader = self._reader, None
+        if reader is not None:
+            reader.__del__()
