@@ -20,5 +20,5 @@ setup(
     package_data={PACKAGE: ["py.typed"]},
     install_requires=["numpy", "PyYAML", "rosbags", "cyclonedds"],
     python_requires=">=3.10",
-    entry_points={"console_scripts": ["taiji2 = taiji2_runtime.cli:main"]},
+    entry_points={"console_scripts": ["taiji2 = taiji2_runtime.cli.main:main"]},
 )

@@ -53,6 +53,9 @@ _BASE_TYPES: dict[str, Any] = {
     "wstring": str,
 }
 _BASE_DEFAULTS: dict[str, Any] = {"bool": False, "string": "", "wstring": "", "float32": 0.0, "float64": 0.0}
+#: Non-zero field defaults of standard messages, which rosbags' stored definitions do not carry
+#: (rosidl: geometry_msgs/Quaternion ``float64 w 1``). This workspace's .msg files declare none.
+_FIELD_DEFAULTS: dict[str, dict[str, Any]] = {"geometry_msgs/msg/Quaternion": {"w": 1.0}}
 
 # rosbags node kinds (rosbags.typesys.base.Nodetype): BASE=1, NAME=2, ARRAY=3, SEQUENCE=4
 _BASE, _NAME, _ARRAY, _SEQUENCE = 1, 2, 3, 4
@@ -185,8 +188,11 @@ def message_class(msgtype: str) -> type:
         consts, fields = store.fielddefs[full]
         field_types: dict[str, str] = {}
         specs = []
+        overrides = _FIELD_DEFAULTS.get(full, {})
         for field_name, desc in fields:
             annotation, default_factory, type_text = _field_spec(desc)
+            if field_name in overrides:
+                default_factory = lambda v=overrides[field_name]: v  # noqa: E731
             specs.append((field_name, annotation, default_factory))
             field_types[field_name] = type_text
 

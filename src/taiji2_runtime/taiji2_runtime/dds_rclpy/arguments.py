@@ -45,6 +45,18 @@ class RosArguments:
     unparsed: list[str] = field(default_factory=list)
 
 
+def _numeric(value: Any) -> Any:
+    # YAML 1.1 reads "1e-6" as a string; rcl reads it as a double
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    if isinstance(value, list):
+        return [_numeric(v) for v in value]
+    return value
+
+
 def parse_parameter_value(text: str) -> Any:
     """Value of ``name:=value`` by YAML rules, as rcl parses it (``1`` int, ``1.0`` double, ``[..]`` array)."""
     try:
@@ -53,7 +65,7 @@ def parse_parameter_value(text: str) -> Any:
         return text
     if value is None and text.strip() not in ("", "~", "null"):
         return text
-    return value
+    return _numeric(value)
 
 
 def _split_assignment(flag: str, text: str) -> tuple[str | None, str, str]:

@@ -13,7 +13,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from cyclonedds.core import GuardCondition, WaitSet
+from cyclonedds.core import DDSException, GuardCondition, WaitSet
 
 from .context import Context, get_default_context
 from .exceptions import NotInitializedException
@@ -156,6 +156,8 @@ class Executor:
         return self._waitset
 
     def _collect(self) -> bool:
+        if not self._context.ok():
+            return False
         for node in list(self._nodes):
             for subscription in list(node.subscriptions):
                 for msg in subscription.take(_TAKE_BATCH):
@@ -190,10 +192,15 @@ class Executor:
             wait_ns = min(wait_ns, timer_ns)
         if remaining_s is not None:
             wait_ns = min(wait_ns, max(0, int(remaining_s * 1e9)))
-        if wait_ns > 0:
-            waitset.wait(wait_ns)
-        if self._guard is not None:
-            self._guard.take()
+        try:
+            if wait_ns > 0:
+                waitset.wait(wait_ns)
+            if self._guard is not None and self._context.ok():
+                self._guard.take()
+        except DDSException:
+            # the participant went away under us: a signal shut the context down mid-wait
+            if self._context.ok():
+                raise
 
 
 class SingleThreadedExecutor(Executor):

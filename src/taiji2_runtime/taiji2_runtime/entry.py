@@ -1,0 +1,68 @@
+"""``main()`` of every node, identical on rclpy and on the embedded runtime.
+
+Bad input (malformed ``--ros-args``, wrong parameter type or range, non-physical configuration,
+duplicate node name, no usable DDS interface) ends the process with one line on stderr naming the
+problem and exit status 2, never a traceback. ``TAIJI2_DEBUG=1`` shows the traceback.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import traceback
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from taiji2_runtime.ros import rclpy
+
+#: exit status for bad input (as argparse uses)
+EXIT_BAD_INPUT = 2
+
+
+def _user_error_types() -> tuple[type[BaseException], ...]:
+    names = ("ParameterException", "InvalidParameterTypeException", "InvalidParameterValueException",
+             "ParameterNotDeclaredException", "ParameterAlreadyDeclaredException", "InvalidParameterException",
+             "DdsUnavailableError", "NodeNameNonUniqueError", "InvalidNodeNameException",
+             "InvalidNamespaceException", "InvalidTopicNameException", "RCLError")
+    found = [getattr(rclpy.exceptions, n) for n in names if hasattr(rclpy.exceptions, n)]
+    return (ValueError, LookupError, OSError, *found)
+
+
+def _shutdown_types() -> tuple[type[BaseException], ...]:
+    external = getattr(rclpy.executors, "ExternalShutdownException", None)
+    return (KeyboardInterrupt, external) if external else (KeyboardInterrupt,)
+
+
+def report_error(program: str, exc: BaseException) -> None:
+    """Print ``error: <program>: <message>`` (one line) and, with TAIJI2_DEBUG=1, the traceback."""
+    message = " ".join(str(exc).split()) or type(exc).__name__
+    print(f"error: {program}: {message}", file=sys.stderr)
+    if os.environ.get("TAIJI2_DEBUG"):
+        traceback.print_exception(exc)
+
+
+def run_node(make_node: Callable[[], Any], args: Sequence[str] | None = None, program: str | None = None) -> int:
+    """Init the client library, build the node, spin until shutdown; return the exit status."""
+    argv = list(sys.argv if args is None else args)
+    program = program or os.path.basename(argv[0] if argv else "node")
+    node = None
+    try:
+        rclpy.init(args=argv)
+        node = make_node()
+        rclpy.spin(node)
+    except _shutdown_types():
+        pass
+    except _user_error_types() as exc:
+        report_error(program, exc)
+        return EXIT_BAD_INPUT
+    except Exception as exc:
+        report_error(program, exc)
+        return 1
+    finally:
+        if node is not None:
+            try:
+                node.destroy_node()
+            except Exception:  # noqa: S110 - best effort during teardown
+                pass
+        rclpy.try_shutdown()
+    return 0

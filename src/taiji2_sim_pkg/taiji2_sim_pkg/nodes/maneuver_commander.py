@@ -1,0 +1,104 @@
+"""maneuver_commander: publishes the square-wave calibration torque on /taiji2/maneuver/command.
+
+Thin ROS glue around :class:`taiji2_sim_pkg.core.maneuver.SquareWaveManeuver`. Parameters are
+documented in ``config/maneuver_commander.yaml``. The command is published at every tick of
+``publish_rate_hz`` on the node clock (so at each change, delayed by at most one tick, and at least
+at 1 Hz); on simulated time (``use_sim_time``) every tick follows /clock, which lets the simulator
+run in lock-step with the command stream.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from taiji2_runtime.entry import run_node
+from taiji2_runtime.ros import messages, rclpy
+from taiji2_sim_pkg.core.config import builtin_layouts, load_config
+from taiji2_sim_pkg.core.maneuver import SquareWaveManeuver
+
+COMMAND_TOPIC = "/taiji2/maneuver/command"
+_NS = 1e-9
+
+
+def _descriptor(description: str, *, low: float | None = None, high: float | None = None) -> Any:
+    rcl = messages.rcl_interfaces
+    descriptor = rcl.ParameterDescriptor(description=description)
+    if low is not None:
+        descriptor.floating_point_range = [rcl.FloatingPointRange(from_value=low, to_value=high, step=0.0)]
+    return descriptor
+
+
+class ManeuverCommander(rclpy.node.Node):
+    """Publishes ``geometry_msgs/WrenchStamped`` torque commands (frame ``crf``, N m)."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("maneuver_commander", **node_kwargs)
+        preset = self.declare_parameter(
+            "preset", "type1", _descriptor(f"nominal maneuver of a layout: {', '.join(builtin_layouts())}")
+        ).value
+        layout = load_config(preset)
+        nominal = layout.maneuver
+        p = {
+            "period_s": self.declare_parameter(
+                "period_s", float(nominal.period_s), _descriptor("square-wave period [s]")).value,
+            "amplitude_n_m": self.declare_parameter(
+                "amplitude_n_m", [float(v) for v in nominal.amplitude_n_m],
+                _descriptor("torque amplitude about CRF X, Y, Z [N m]")).value,
+            "phase_s": self.declare_parameter(
+                "phase_s", [float(v) for v in nominal.phase_s],
+                _descriptor("time shift of each axis' square wave [s]")).value,
+            "start_s": self.declare_parameter(
+                "start_s", float(nominal.start_s),
+                _descriptor("maneuver start after the time origin [s] (origin: t = 0 of /clock on simulated "
+                            "time, else the node start)")).value,
+            "duration_s": self.declare_parameter(
+                "duration_s", float(nominal.duration_s), _descriptor("maneuver duration [s]")).value,
+        }
+        rate_hz = self.declare_parameter(
+            "publish_rate_hz", 10.0, _descriptor("command publishing rate [Hz]", low=1.0, high=1000.0)).value
+        self._frame_id = self.declare_parameter("frame_id", "crf", _descriptor("header.frame_id")).value
+        thrusters = layout.thrusters
+        lever_arm_m = self.declare_parameter(
+            "thruster_lever_arm_m", float(thrusters.lever_arm_m),
+            _descriptor("lever arm of the thruster making each axis' torque [m]; thrust = |torque| / arm")).value
+        self._maneuver = SquareWaveManeuver(**p)
+        # refuse a maneuver the micro-thrusters cannot fly (ManeuverError names the axis)
+        self._maneuver.check_thrust(thrusters.min_thrust_n, thrusters.max_thrust_n, lever_arm_m)
+        self._wrench_type = messages.geometry_msgs.WrenchStamped
+        qos = rclpy.qos.QoSProfile(
+            history=rclpy.qos.HistoryPolicy.KEEP_ALL, reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
+        self._publisher = self.create_publisher(self._wrench_type, COMMAND_TOPIC, qos)
+        self._sim_time = bool(self.get_parameter("use_sim_time").value)
+        self._origin_ns: int | None = 0 if self._sim_time else None
+        self._last_torque: np.ndarray | None = None
+        self.create_timer(1.0 / rate_hz, self._on_tick)
+        self.get_logger().info(
+            f"preset {preset}: period {p['period_s']} s, amplitude {p['amplitude_n_m']} N m, "
+            f"phase {p['phase_s']} s, start {p['start_s']} s, duration {p['duration_s']} s, "
+            f"{rate_hz} Hz on {'simulated' if self._sim_time else 'system'} time")
+
+    def _on_tick(self) -> None:
+        now = self.get_clock().now()
+        if self._origin_ns is None:
+            self._origin_ns = now.nanoseconds
+        t_s = (now.nanoseconds - self._origin_ns) * _NS
+        torque = self._maneuver.torque_at(t_s)
+        msg = self._wrench_type()
+        msg.header.stamp = now.to_msg()
+        msg.header.frame_id = self._frame_id
+        msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in torque)
+        self._publisher.publish(msg)
+        if self._last_torque is None or not np.array_equal(torque, self._last_torque):
+            self.get_logger().debug(f"t = {t_s:.1f} s: torque {torque.tolist()} N m")
+        self._last_torque = torque
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(ManeuverCommander, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
