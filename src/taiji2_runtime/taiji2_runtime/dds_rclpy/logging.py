@@ -21,6 +21,7 @@ class LoggingSeverity(IntEnum):
 
 _default_level = LoggingSeverity.INFO
 _levels: dict[str, LoggingSeverity] = {}
+_last_logged: dict[tuple[str, int], int] = {}
 
 
 def set_default_level(level: str | LoggingSeverity) -> None:
@@ -47,10 +48,18 @@ class RcutilsLogger:
     def is_enabled_for(self, severity: LoggingSeverity) -> bool:
         return severity >= self.get_effective_level()
 
-    def log(self, message: Any, severity: LoggingSeverity, **_kwargs: Any) -> bool:
+    def log(self, message: Any, severity: LoggingSeverity, *, throttle_duration_sec: float | None = None,
+            once: bool = False, **_kwargs: Any) -> bool:
         if not self.is_enabled_for(severity):
             return False
         ns = time.time_ns()
+        if throttle_duration_sec or once:
+            caller = sys._getframe(2)
+            site = (caller.f_code.co_filename, caller.f_lineno)
+            last = _last_logged.get(site)
+            if last is not None and (once or ns - last < throttle_duration_sec * 1e9):
+                return False
+            _last_logged[site] = ns
         print(
             f"[{severity.name}] [{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}] [{self.name}]: {message}",
             file=sys.stderr,

@@ -57,6 +57,10 @@ class ManeuverCommander(rclpy.node.Node):
             "duration_s": self.declare_parameter(
                 "duration_s", float(nominal.duration_s), _descriptor("maneuver duration [s]")).value,
         }
+        self._lookahead_ns = int(round(1e9 * self.declare_parameter(
+            "lookahead_s", 0.0, _descriptor("publish time-tagged commands this far ahead of the clock [s] "
+                                            "(lets an accelerated simulation run without a round trip per "
+                                            "step)", low=0.0, high=3600.0)).value))
         rate_hz = self.declare_parameter(
             "publish_rate_hz", 10.0, _descriptor("command publishing rate [Hz]", low=1.0, high=1000.0)).value
         self._frame_id = self.declare_parameter("frame_id", "crf", _descriptor("header.frame_id")).value
@@ -74,20 +78,42 @@ class ManeuverCommander(rclpy.node.Node):
         self._sim_time = bool(self.get_parameter("use_sim_time").value)
         self._origin_ns: int | None = 0 if self._sim_time else None
         self._last_torque: np.ndarray | None = None
+        self._period_ns = int(round(1e9 / rate_hz))
+        self._next_stamp_ns: int | None = None
         self.create_timer(1.0 / rate_hz, self._on_tick)
+        # The first clock tick comes one period after start; a subscriber (the simulator) that is
+        # already waiting gets the command valid at the start at once instead.
+        self._first_command_timer = self.create_timer(
+            0.02, self._publish_first_command,
+            clock=rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME))
         self.get_logger().info(
             f"preset {preset}: period {p['period_s']} s, amplitude {p['amplitude_n_m']} N m, "
             f"phase {p['phase_s']} s, start {p['start_s']} s, duration {p['duration_s']} s, "
             f"{rate_hz} Hz on {'simulated' if self._sim_time else 'system'} time")
 
+    def _publish_first_command(self) -> None:
+        if self._last_torque is not None:
+            self._first_command_timer.cancel()
+        elif self._publisher.get_subscription_count() > 0:
+            self._on_tick()
+            self._first_command_timer.cancel()
+
     def _on_tick(self) -> None:
-        now = self.get_clock().now()
+        now_ns = self.get_clock().now().nanoseconds
         if self._origin_ns is None:
-            self._origin_ns = now.nanoseconds
-        t_s = (now.nanoseconds - self._origin_ns) * _NS
+            self._origin_ns = now_ns
+        if self._next_stamp_ns is None or self._lookahead_ns == 0:
+            self._next_stamp_ns = now_ns
+        # every tick up to now + lookahead, in stamp order (time-tagged commands)
+        while self._next_stamp_ns <= now_ns + self._lookahead_ns:
+            self._publish_command(self._next_stamp_ns)
+            self._next_stamp_ns += self._period_ns
+
+    def _publish_command(self, stamp_ns: int) -> None:
+        t_s = (stamp_ns - self._origin_ns) * _NS
         torque = self._maneuver.torque_at(t_s)
         msg = self._wrench_type()
-        msg.header.stamp = now.to_msg()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
         msg.header.frame_id = self._frame_id
         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in torque)
         self._publisher.publish(msg)

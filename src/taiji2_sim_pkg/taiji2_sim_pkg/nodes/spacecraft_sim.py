@@ -1,0 +1,347 @@
+"""spacecraft_sim: the spacecraft stand-in. Applies the received torque command and publishes the
+star tracker and both GRS at the sample rate, plus ground truth under /taiji2/sim/.
+
+Thin ROS glue around :class:`taiji2_sim_pkg.core.simulator.Simulator`; parameters are documented in
+``config/spacecraft_sim.yaml``. Three clock modes:
+
+``realtime``
+    a wall timer steps the simulation at the sample rate; stamps are system time.
+``accelerated``
+    simulated time as fast as the graph allows: the node owns ``/clock`` and, with
+    ``sync_with_command``, steps from t_k only once a command stamped >= t_k has arrived, so the
+    run is deterministic and an edited or replayed command stream drives it. All raw topics are
+    reliable keep-all, so every reliable subscriber gets every sample (lossless).
+``follow``
+    steps whenever the node clock (``use_sim_time``, e.g. ``taiji2 bag play --clock``) passes the
+    next sample time.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import yaml
+
+from taiji2_runtime.entry import run_node
+from taiji2_runtime.ros import messages, rclpy
+from taiji2_sim_pkg.core.command_gate import CommandGate, CommandSchedule
+from taiji2_sim_pkg.core.config import load_config
+from taiji2_sim_pkg.core.range_check import RangeMonitor
+from taiji2_sim_pkg.core.simulator import SimSample, Simulator
+
+COMMAND_TOPIC = "/taiji2/maneuver/command"
+STAR_TRACKER_TOPIC = "/taiji2/star_tracker"
+GRS_TOPICS = ("/taiji2/grs1/voltages", "/taiji2/grs2/voltages")
+TMRF_FRAMES = ("tmrf1", "tmrf2")
+CLOCK_MODES = ("realtime", "accelerated", "follow")
+_NS = 1_000_000_000
+
+
+def _descriptor(description: str, **ranges: tuple[float, float]) -> Any:
+    rcl = messages.rcl_interfaces
+    descriptor = rcl.ParameterDescriptor(description=description)
+    if "float_range" in ranges:
+        low, high = ranges["float_range"]
+        descriptor.floating_point_range = [rcl.FloatingPointRange(from_value=low, to_value=high, step=0.0)]
+    if "int_range" in ranges:
+        low, high = ranges["int_range"]
+        descriptor.integer_range = [rcl.IntegerRange(from_value=int(low), to_value=int(high), step=0)]
+    return descriptor
+
+
+def _overrides(entries: Sequence[str]) -> dict[str, Any]:
+    """``["noise.srp.enabled=false", ...]`` -> ``{"noise.srp.enabled": False}`` (YAML values)."""
+    result: dict[str, Any] = {}
+    for entry in entries:
+        if "=" not in entry:
+            raise ValueError(f"config_overrides: {entry!r} is not 'dotted.key=value'")
+        key, text = entry.split("=", 1)
+        result[key.strip()] = yaml.safe_load(text)
+    return result
+
+
+def _steady_clock() -> Any:
+    return rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
+
+
+def _stamp(msg_header: Any, t_ns: int) -> None:
+    msg_header.stamp.sec, msg_header.stamp.nanosec = divmod(int(t_ns), _NS)
+
+
+class SpacecraftSim(rclpy.node.Node):
+    """Publishes /taiji2/star_tracker and /taiji2/grsN/voltages from the simulated spacecraft."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("spacecraft_sim", **node_kwargs)
+        dp = self.declare_parameter
+        layout = dp("layout", "type1", _descriptor("built-in layout (type1, type2), used when config_file is empty")).value
+        config_file = dp("config_file", "", _descriptor("simulator config YAML; overrides layout")).value
+        overrides = dp("config_overrides", [""], _descriptor("config overrides 'dotted.key=value'")).value
+        seed = dp("seed", -1, _descriptor("run seed; -1 draws one and logs it", int_range=(-1, 2**62))).value
+        self._mode = dp("clock_mode", "accelerated", _descriptor(f"one of {', '.join(CLOCK_MODES)}")).value
+        if self._mode not in CLOCK_MODES:
+            raise ValueError(f"clock_mode: {self._mode!r} is not one of {', '.join(CLOCK_MODES)}")
+        duration_s = dp("duration_s", -1.0, _descriptor(
+            "simulated duration [s]; -1: the configured maneuver's end", float_range=(-1.0, 1e7))).value
+        self._sync = dp("sync_with_command", True, _descriptor(
+            "accelerated: step from t_k only after a command stamped >= t_k arrived")).value
+        self._command_timeout_s = dp("command_timeout_s", 2.0, _descriptor(
+            "accelerated + sync: wall seconds to wait for a command before stepping with the last one",
+            float_range=(0.0, 3600.0))).value
+        self._wait_subscribers = dp("wait_for_subscribers", 0, _descriptor(
+            "accelerated: start only once every raw topic has this many subscribers", int_range=(0, 1000))).value
+        self._exit_when_done = dp("exit_when_done", True, _descriptor("shut down after duration_s")).value
+        self._publish_truth = dp("publish_truth", True, _descriptor("publish ground truth under /taiji2/sim/")).value
+
+        config = load_config(config_file or layout, overrides=_overrides([o for o in overrides if o]))
+        self._sim = Simulator(config, seed=None if seed < 0 else seed)
+        self._dt_ns = int(round(config.dt_s * _NS))
+        end_s = config.maneuver.start_s + config.maneuver.duration_s if duration_s < 0 else duration_s
+        self._n_steps = int(round(end_s / config.dt_s))
+        self._gate = CommandGate(config.thrusters.max_thrust_n * config.thrusters.lever_arm_m)
+        self._schedule = CommandSchedule()
+        self._range = RangeMonitor(config.grs.range_m_s2)
+        self._started = False
+        self._done = False
+        self._t0_wall_ns = 0
+        self._waiting_since = time.monotonic()
+        self._late_commands = 0
+
+        m = messages
+        reliable_all = rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL,
+                                            reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
+        self._star_pub = self.create_publisher(m.taiji2_msgs.StarTracker, STAR_TRACKER_TOPIC, reliable_all)
+        self._grs_pubs = [self.create_publisher(m.taiji2_msgs.GrsVoltages, t, reliable_all) for t in GRS_TOPICS]
+        self._diag_pub = self.create_publisher(m.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
+        self._clock_pub = (self.create_publisher(m.rosgraph_msgs.Clock, "/clock", 10)
+                           if self._mode == "accelerated" else None)
+        self._truth = _TruthPublishers(self, reliable_all) if self._publish_truth else None
+        latched = rclpy.qos.QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+        provenance_pub = self.create_publisher(m.std_msgs.String, "/taiji2/sim/provenance", latched)
+        provenance_pub.publish(m.std_msgs.String(data=json.dumps(self._sim.provenance())))
+        self.create_subscription(m.geometry_msgs.WrenchStamped, COMMAND_TOPIC, self._on_command, reliable_all)
+
+        if self._mode == "realtime":
+            self.create_timer(config.dt_s, self._on_realtime_tick)
+        elif self._mode == "follow":
+            self.create_timer(config.dt_s, self._on_follow_tick)
+        else:
+            # wall-clock (steady) timer: in accelerated mode this node is the source of simulated time
+            self.create_timer(0.0 if not self._sync else 0.05, self._on_accelerated_tick, clock=_steady_clock())
+        self.create_timer(1.0, self._publish_diagnostics, clock=_steady_clock())
+        self.get_logger().info(
+            f"layout {config.layout}, seed {self._sim.seed}, {self._n_steps} steps of {config.dt_s} s, "
+            f"clock mode {self._mode}{' (lock-step with commands)' if self._sync and self._mode == 'accelerated' else ''}")
+
+    # -- commands ------------------------------------------------------------------------------
+    def _on_command(self, msg: Any) -> None:
+        torque = (msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z)
+        reason = self._gate.offer(torque, msg.header.frame_id)
+        if reason is not None:
+            self.get_logger().warn(
+                f"rejected command #{self._gate.rejected_total} on {COMMAND_TOPIC}: {reason}; "
+                "keeping the last valid command", throttle_duration_sec=5.0)
+            return
+        stamp_ns = msg.header.stamp.sec * _NS + msg.header.stamp.nanosec
+        if not self._schedule.offer(stamp_ns, self._gate.torque_n_m):
+            self.get_logger().warn(f"command stamped {stamp_ns / _NS:.3f} s arrived out of order; ignored",
+                                   throttle_duration_sec=5.0)
+        if self._mode == "accelerated" and self._sync:
+            self._step_while_commanded()
+
+    # -- stepping ------------------------------------------------------------------------------
+    def _time_ns(self) -> int:
+        return self._sim.step_index * self._dt_ns
+
+    def _step_once(self, stamp_offset_ns: int = 0) -> None:
+        if self._mode == "realtime":
+            torque = self._gate.torque_n_m  # wall-clock commanding: the latest valid command
+        else:
+            torque = self._schedule.command_at(self._time_ns())  # time-tagged: in effect at t_k
+        sample = self._sim.step(torque)
+        t_ns = self._time_ns() + stamp_offset_ns
+        self._publish_sample(sample, t_ns)
+        if self._sim.step_index >= self._n_steps:
+            self._finish()
+
+    def _on_realtime_tick(self) -> None:
+        if self._done:
+            return
+        if not self._started:
+            self._started, self._t0_wall_ns = True, self.get_clock().now().nanoseconds
+        self._step_once(self._t0_wall_ns)
+
+    def _on_follow_tick(self) -> None:
+        now_ns = self.get_clock().now().nanoseconds
+        while not self._done and now_ns >= self._time_ns() + self._dt_ns:
+            self._step_once()
+
+    def _ready_to_start(self) -> bool:
+        if self._wait_subscribers <= 0:
+            return True
+        pubs = [self._star_pub, *self._grs_pubs]
+        return all(p.get_subscription_count() >= self._wait_subscribers for p in pubs)
+
+    def _publish_clock(self) -> None:
+        clock = messages.rosgraph_msgs.Clock()
+        clock.clock.sec, clock.clock.nanosec = divmod(self._time_ns(), _NS)
+        self._clock_pub.publish(clock)
+        self._waiting_since = time.monotonic()
+
+    def _on_accelerated_tick(self) -> None:
+        if self._done:
+            return
+        if not self._started:
+            if not self._ready_to_start():
+                return
+            self._started = True
+            self._publish_clock()
+            if self._sync:
+                self._step_while_commanded()  # a command may have arrived before the start
+            return
+        if not self._sync:
+            for _ in range(10):  # a burst per tick keeps the executor responsive to commands
+                if self._done:
+                    return
+                self._step_once()
+                self._publish_clock()
+            return
+        if time.monotonic() - self._waiting_since > self._command_timeout_s:
+            self._late_commands += 1
+            self.get_logger().warn(
+                f"no command stamped >= {self._time_ns() / _NS:.1f} s within {self._command_timeout_s} s; "
+                "stepping with the last valid command", throttle_duration_sec=10.0)
+            self._step_once()
+            if not self._done:
+                self._publish_clock()
+
+    def _step_while_commanded(self) -> None:
+        while self._started and not self._done and self._schedule.covers(self._time_ns()):
+            self._step_once()
+            if not self._done:
+                self._publish_clock()
+
+    def _finish(self) -> None:
+        self._done = True
+        for pub in (self._star_pub, *self._grs_pubs):
+            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=10))
+        self._publish_diagnostics()
+        summary = self._range.summary()
+        self.get_logger().info(f"done: {self._sim.step_index} steps to t = {self._time_ns() / _NS:.1f} s; "
+                               "peak |linear| / range: maneuver "
+                               f"{np.round(summary['maneuver']['fraction_of_range'], 3).tolist()}, total "
+                               f"{np.round(summary['total']['fraction_of_range'], 3).tolist()}; "
+                               f"{self._gate.rejected_total} commands rejected, {self._late_commands} late")
+        if self._exit_when_done:
+            self.context.try_shutdown("simulation finished")
+
+    # -- output --------------------------------------------------------------------------------
+    def _publish_sample(self, sample: SimSample, t_ns: int) -> None:
+        m = messages.taiji2_msgs
+        star = m.StarTracker()
+        _stamp(star.header, t_ns)
+        star.header.frame_id = "crf"
+        q = sample.st_quat_xyzw
+        star.attitude.x, star.attitude.y, star.attitude.z, star.attitude.w = (float(v) for v in q)
+        star.attitude_covariance = [float(v) for v in sample.st_cov_rad2]
+        self._star_pub.publish(star)
+        for index, pub in enumerate(self._grs_pubs):
+            volts = sample.voltages_v[index]
+            grs = m.GrsVoltages()
+            _stamp(grs.header, t_ns)
+            grs.header.frame_id = TMRF_FRAMES[index]
+            grs.grs_id = index + 1
+            grs.vx1, grs.vx2, grs.vy1, grs.vy2, grs.vz1, grs.vz2 = (float(v) for v in volts)
+            pub.publish(grs)
+        truth = sample.truth
+        for event in self._range.update(sample.t_s, truth.grs_linear_maneuver, truth.grs_linear_meas):
+            self.get_logger().warn(event.message())
+        if self._truth is not None:
+            self._truth.publish(sample, t_ns, self._sim.step_index)
+
+    def _publish_diagnostics(self) -> None:
+        d = messages.diagnostic_msgs
+        summary = self._range.summary()
+        status = d.DiagnosticStatus(name="spacecraft_sim: GRS linear range", hardware_id="taiji2_sim")
+        over_total = not summary["total"]["within_range"]
+        over_maneuver = not summary["maneuver"]["within_range"]
+        status.level = d.DiagnosticStatus.ERROR if over_maneuver else (
+            d.DiagnosticStatus.WARN if over_total else d.DiagnosticStatus.OK)
+        status.message = ("maneuver-induced linear acceleration leaves the GRS range" if over_maneuver else
+                          "noise peaks leave the GRS range (maneuver part inside)" if over_total else
+                          "inside the GRS range")
+        values = {"range_m_s2": summary["range_m_s2"], "samples": summary["samples"],
+                  "maneuver_peak_fraction_of_range": summary["maneuver"]["fraction_of_range"],
+                  "total_peak_fraction_of_range": summary["total"]["fraction_of_range"],
+                  "total_samples_outside": summary["total"]["samples_outside"],
+                  "commands_rejected": self._gate.rejected,
+                  "late_commands": self._late_commands, "sim_time_s": self._time_ns() / _NS}
+        status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in values.items()]
+        array = d.DiagnosticArray(status=[status])
+        _stamp(array.header, self._time_ns())
+        self._diag_pub.publish(array)
+
+
+class _TruthPublishers:
+    """Ground truth for evaluation only (never read by estimators): rate, acceleration, torque, G, d."""
+
+    def __init__(self, node: rclpy.node.Node, qos: Any) -> None:
+        g, t = messages.geometry_msgs, messages.taiji2_msgs
+        self._rate = node.create_publisher(g.Vector3Stamped, "/taiji2/sim/angular_rate", qos)
+        self._accel = node.create_publisher(g.Vector3Stamped, "/taiji2/sim/angular_acceleration", qos)
+        self._attitude = node.create_publisher(g.QuaternionStamped, "/taiji2/sim/attitude", qos)
+        self._torque = node.create_publisher(g.WrenchStamped, "/taiji2/sim/applied_wrench", qos)
+        self._scale = [node.create_publisher(t.ScaleFactorEstimate, f"/taiji2/sim/grs{i}/scale_factors", qos)
+                       for i in (1, 2)]
+        self._offset = [node.create_publisher(t.ComOffsetEstimate, f"/taiji2/sim/grs{i}/com_offset", qos)
+                        for i in (1, 2)]
+        self._mass_kg = None
+
+    def publish(self, sample: SimSample, t_ns: int, step: int) -> None:
+        g, t = messages.geometry_msgs, messages.taiji2_msgs
+        truth = sample.truth
+        for pub, vector in ((self._rate, truth.omega_rad_s), (self._accel, truth.omega_dot_rad_s2)):
+            msg = g.Vector3Stamped()
+            _stamp(msg.header, t_ns)
+            msg.header.frame_id = "crf"
+            msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in vector)
+            pub.publish(msg)
+        attitude = g.QuaternionStamped()
+        _stamp(attitude.header, t_ns)
+        attitude.header.frame_id = "crf"
+        attitude.quaternion.x, attitude.quaternion.y, attitude.quaternion.z, attitude.quaternion.w = (
+            float(v) for v in truth.quat_xyzw)
+        self._attitude.publish(attitude)
+        wrench = g.WrenchStamped()
+        _stamp(wrench.header, t_ns)
+        wrench.header.frame_id = "crf"
+        wrench.wrench.torque.x, wrench.wrench.torque.y, wrench.wrench.torque.z = (
+            float(v) for v in truth.torque_applied_n_m)
+        # force field carries the spacecraft non-gravitational acceleration [m s^-2] (documented)
+        wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z = (float(v) for v in truth.a_sc_m_s2)
+        self._torque.publish(wrench)
+        if step % 10 != 1:
+            return  # scale factors and offsets change slowly: 1 Hz is plenty
+        for i in range(2):
+            sf = t.ScaleFactorEstimate(grs_id=i + 1, method="truth", samples_used=step)
+            _stamp(sf.header, t_ns)
+            sf.header.frame_id = TMRF_FRAMES[i]
+            sf.scale_factors = [float(v) for v in truth.grs_angular_scale_factors[i]]
+            self._scale[i].publish(sf)
+            d = t.ComOffsetEstimate(grs_id=i + 1, method="truth", samples_used=step)
+            _stamp(d.header, t_ns)
+            d.header.frame_id = "crf"
+            d.offset.x, d.offset.y, d.offset.z = (float(v) for v in truth.com_offset_m[i])
+            self._offset[i].publish(d)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(SpacecraftSim, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
