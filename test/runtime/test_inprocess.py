@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import pytest
-
 from conftest import spin_until
 from taiji2_runtime.ros import messages, rclpy
 
@@ -24,8 +23,8 @@ def test_publish_subscribe_delivers_every_message_in_order(context, executor):
     executor.add_node(listener)
     keep_all = QoS.QoSProfile(history=QoS.HistoryPolicy.KEEP_ALL, reliability=QoS.ReliabilityPolicy.RELIABLE)
     received: list[float] = []
-    listener.create_subscription(messages.geometry_msgs.WrenchStamped, "/t", lambda m: received.append(m.wrench.torque.z),
-                                 keep_all)
+    listener.create_subscription(messages.geometry_msgs.WrenchStamped, "/t",
+                                 lambda m: received.append(m.wrench.torque.z), keep_all)
     pub = talker.create_publisher(messages.geometry_msgs.WrenchStamped, "/t", keep_all)
     assert spin_until(executor, lambda: pub.get_subscription_count() == 1)
     n = 2000
@@ -99,7 +98,7 @@ def test_parameter_type_and_range_are_enforced(context):
     ctx = _context_with(["-p", "rate:=3", "-p", "ratio:=5.0"])
     try:
         node = Node("n", context=ctx)
-        with pytest.raises(rclpy.exceptions.InvalidParameterTypeException, match="rate.*INTEGER.*DOUBLE"):
+        with pytest.raises(rclpy.exceptions.InvalidParameterTypeException, match=r"rate.*INTEGER.*DOUBLE"):
             node.declare_parameter("rate", 1.0)
         rcl = messages.rcl_interfaces
         descriptor = rcl.ParameterDescriptor(
@@ -120,7 +119,8 @@ def test_parameter_type_and_range_are_enforced(context):
 def test_malformed_ros_args_raise_clear_errors():
     from taiji2_runtime.dds_rclpy.context import Context
 
-    for args, pattern in ((["-p", "novalue"], "name:=value"), (["--bogus"], "unknown flag"), (["-p"], "expects a value")):
+    cases = ((["-p", "novalue"], "name:=value"), (["--bogus"], "unknown flag"), (["-p"], "expects a value"))
+    for args, pattern in cases:
         with pytest.raises(rclpy.exceptions.InvalidRosArgumentsException, match=pattern):
             Context().init(["x", "--ros-args", *args])
 

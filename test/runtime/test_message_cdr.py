@@ -6,8 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg
-
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from taiji2_runtime.interfaces import message_class
 
 MSG_DIR = Path(__file__).resolve().parents[2] / "src" / "taiji2_msgs" / "msg"
@@ -23,7 +22,7 @@ def _reference_store():
 
 def _fill(store, msgtype: str, rng: np.random.Generator, ours: object):
     """Random values set on our message, and the same values as a rosbags message."""
-    consts, fields = store.fielddefs[msgtype]
+    _consts, fields = store.fielddefs[msgtype]
     kwargs = {}
     for name, (kind, args) in fields:
         if kind == 2:  # nested message

@@ -62,7 +62,7 @@ def run_node(make_node: Callable[[], Any], args: Sequence[str] | None = None, pr
         if node is not None:
             try:
                 node.destroy_node()
-            except Exception:  # noqa: S110 - best effort during teardown
+            except Exception:
                 pass
         rclpy.try_shutdown()
     return 0

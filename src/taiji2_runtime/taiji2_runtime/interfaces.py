@@ -29,7 +29,7 @@ from typing import Any
 
 import cyclonedds.idl.types as idl_types
 from cyclonedds.idl import IdlStruct
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 #: Interface packages of this workspace whose ``.msg`` files are loaded at import.

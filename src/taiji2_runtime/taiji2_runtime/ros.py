@@ -42,7 +42,7 @@ else:
         RUNTIME = "cyclonedds"
 
 if RUNTIME == "cyclonedds":
-    from taiji2_runtime import dds_rclpy as rclpy  # noqa: F811
+    from taiji2_runtime import dds_rclpy as rclpy
 
 
 class _Messages:

@@ -84,7 +84,8 @@ def _spin(node: Any, until: Any) -> None:
 
 def cmd_list(args: argparse.Namespace) -> int:
     with _Session() as node:
-        _spin(node, lambda t0=time.monotonic(): time.monotonic() - t0 > _DISCOVERY_S)
+        start = time.monotonic()
+        _spin(node, lambda: time.monotonic() - start > _DISCOVERY_S)
         for name, types in node.get_topic_names_and_types():
             print(f"{name} [{', '.join(types)}]" if args.show_types else name)
     return 0

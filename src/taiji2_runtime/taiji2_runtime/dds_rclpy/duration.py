@@ -11,7 +11,7 @@ class Duration:
     """A span of time in integer nanoseconds."""
 
     def __init__(self, *, seconds: float = 0, nanoseconds: int = 0) -> None:
-        self._nanoseconds = int(round(seconds * _NS)) + int(nanoseconds)
+        self._nanoseconds = round(seconds * _NS) + int(nanoseconds)
 
     @property
     def nanoseconds(self) -> int:

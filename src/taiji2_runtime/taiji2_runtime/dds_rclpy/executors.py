@@ -74,7 +74,7 @@ class Executor:
         if self._guard is not None:
             try:
                 self._guard.set(True)
-            except Exception:  # noqa: S110 - the participant may be gone during shutdown
+            except Exception:
                 pass
 
     def shutdown(self, timeout_sec: float | None = None) -> bool:

@@ -192,7 +192,7 @@ class Node(ParameterMixin):
         clock: Clock | None = None,
     ) -> Timer:
         """Call ``callback`` every ``timer_period_sec`` seconds of the node clock (simulated if use_sim_time)."""
-        timer = Timer(callback, int(round(timer_period_sec * _NS)), clock or self._clock)
+        timer = Timer(callback, round(timer_period_sec * _NS), clock or self._clock)
         self._timers.append(timer)
         self._context.entities_version += 1
         if self.executor is not None:

@@ -16,7 +16,7 @@ class Time:
     def __init__(
         self, *, seconds: float = 0, nanoseconds: int = 0, clock_type: ClockType = ClockType.SYSTEM_TIME
     ) -> None:
-        total = int(round(seconds * _NS)) + int(nanoseconds)
+        total = round(seconds * _NS) + int(nanoseconds)
         if total < 0:
             raise ValueError("Time: negative times are not allowed")
         self._nanoseconds = total

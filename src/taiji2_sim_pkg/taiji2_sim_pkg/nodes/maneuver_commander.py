@@ -13,9 +13,9 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages, rclpy
+
 from taiji2_sim_pkg.core.config import builtin_layouts, load_config
 from taiji2_sim_pkg.core.maneuver import SquareWaveManeuver
 
@@ -57,10 +57,10 @@ class ManeuverCommander(rclpy.node.Node):
             "duration_s": self.declare_parameter(
                 "duration_s", float(nominal.duration_s), _descriptor("maneuver duration [s]")).value,
         }
-        self._lookahead_ns = int(round(1e9 * self.declare_parameter(
+        self._lookahead_ns = round(1e9 * self.declare_parameter(
             "lookahead_s", 0.0, _descriptor("publish time-tagged commands this far ahead of the clock [s] "
                                             "(lets an accelerated simulation run without a round trip per "
-                                            "step)", low=0.0, high=3600.0)).value))
+                                            "step)", low=0.0, high=3600.0)).value)
         rate_hz = self.declare_parameter(
             "publish_rate_hz", 10.0, _descriptor("command publishing rate [Hz]", low=1.0, high=1000.0)).value
         self._frame_id = self.declare_parameter("frame_id", "crf", _descriptor("header.frame_id")).value
@@ -78,7 +78,7 @@ class ManeuverCommander(rclpy.node.Node):
         self._sim_time = bool(self.get_parameter("use_sim_time").value)
         self._origin_ns: int | None = 0 if self._sim_time else None
         self._last_torque: np.ndarray | None = None
-        self._period_ns = int(round(1e9 / rate_hz))
+        self._period_ns = round(1e9 / rate_hz)
         self._next_stamp_ns: int | None = None
         self.create_timer(1.0 / rate_hz, self._on_tick)
         # The first clock tick comes one period after start; a subscriber (the simulator) that is

@@ -25,9 +25,9 @@ from typing import Any
 
 import numpy as np
 import yaml
-
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages, rclpy
+
 from taiji2_sim_pkg.core.command_gate import CommandGate, CommandSchedule
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.range_check import RangeMonitor
@@ -78,7 +78,8 @@ class SpacecraftSim(rclpy.node.Node):
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("spacecraft_sim", **node_kwargs)
         dp = self.declare_parameter
-        layout = dp("layout", "type1", _descriptor("built-in layout (type1, type2), used when config_file is empty")).value
+        layout = dp("layout", "type1",
+                    _descriptor("built-in layout (type1, type2), used when config_file is empty")).value
         config_file = dp("config_file", "", _descriptor("simulator config YAML; overrides layout")).value
         overrides = dp("config_overrides", [""], _descriptor("config overrides 'dotted.key=value'")).value
         seed = dp("seed", -1, _descriptor("run seed; -1 draws one and logs it", int_range=(-1, 2**62))).value
@@ -99,9 +100,9 @@ class SpacecraftSim(rclpy.node.Node):
 
         config = load_config(config_file or layout, overrides=_overrides([o for o in overrides if o]))
         self._sim = Simulator(config, seed=None if seed < 0 else seed)
-        self._dt_ns = int(round(config.dt_s * _NS))
+        self._dt_ns = round(config.dt_s * _NS)
         end_s = config.maneuver.start_s + config.maneuver.duration_s if duration_s < 0 else duration_s
-        self._n_steps = int(round(end_s / config.dt_s))
+        self._n_steps = round(end_s / config.dt_s)
         self._gate = CommandGate(config.thrusters.max_thrust_n * config.thrusters.lever_arm_m)
         self._schedule = CommandSchedule()
         self._range = RangeMonitor(config.grs.range_m_s2)
@@ -135,7 +136,8 @@ class SpacecraftSim(rclpy.node.Node):
         self.create_timer(1.0, self._publish_diagnostics, clock=_steady_clock())
         self.get_logger().info(
             f"layout {config.layout}, seed {self._sim.seed}, {self._n_steps} steps of {config.dt_s} s, "
-            f"clock mode {self._mode}{' (lock-step with commands)' if self._sync and self._mode == 'accelerated' else ''}")
+            f"clock mode {self._mode}"
+            f"{' (lock-step with time-tagged commands)' if self._sync and self._mode == 'accelerated' else ''}")
 
     # -- commands ------------------------------------------------------------------------------
     def _on_command(self, msg: Any) -> None:
