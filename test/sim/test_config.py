@@ -20,6 +20,8 @@ def test_builtin_layouts_exist():
     assert {"type1", "type2"} <= set(layouts)
     for path in layouts.values():
         assert path.is_file()
+    # node parameter files live in the same directory and are not layouts
+    assert not {"spacecraft_sim", "maneuver_commander"} & set(layouts)
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,234 @@
+"""Reference frames and quaternion algebra.
+
+Conventions (interfaces.md): quaternions are Hamilton, stored ``x y z w``; the attitude q is the
+orientation of the CRF in the inertial frame, ``v_inertial = q v_crf q*`` and
+``q_dot = 0.5 q (0, omega)`` with omega in CRF. A CRF vector v reads ``C_i v`` in TMRF_i.
+
+All quaternion helpers are vectorised over leading axes and broadcast like numpy arithmetic.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = [
+    "apply_matrix",
+    "crf_to_tmrf",
+    "cross",
+    "quat_conjugate",
+    "quat_from_rotvec",
+    "quat_multiply",
+    "quat_prefix_product",
+    "quat_rotate",
+    "rotvec_from_quat",
+]
+
+
+def crf_to_tmrf(grs_id: int, alpha_rad: float) -> np.ndarray:
+    """Rotation C_i taking CRF components to TMRF_i components.
+
+    Parameters
+    ----------
+    grs_id : int
+        1 or 2.
+    alpha_rad : float
+        Angle between the two telescope lines of sight [rad] (nominal pi/3).
+
+    Returns
+    -------
+    numpy.ndarray
+        (3, 3) ``C_1 = [[cos a/2, -sin a/2, 0], [sin a/2, cos a/2, 0], [0, 0, 1]]`` as printed in
+        the paper, or ``C_2 = C_1^T``.
+    """
+    if grs_id not in (1, 2):
+        raise ValueError(f"grs_id: must be 1 or 2, got {grs_id!r}")
+    cos_half = math.cos(0.5 * alpha_rad)
+    sin_half = math.sin(0.5 * alpha_rad)
+    c_1 = np.array([[cos_half, -sin_half, 0.0], [sin_half, cos_half, 0.0], [0.0, 0.0, 1.0]])
+    return c_1 if grs_id == 1 else c_1.T.copy()
+
+
+def apply_matrix(matrix: ArrayLike, vectors: ArrayLike) -> np.ndarray:
+    """Matrix times each vector, ``M v`` for rows v.
+
+    Parameters
+    ----------
+    matrix : array_like
+        (3, 3), or (n, 3, 3) with one matrix per row of ``vectors``.
+    vectors : array_like
+        (..., 3); with a (n, 3, 3) matrix, (n, 3).
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3). Written out by components (no BLAS): the same rounding for any number of rows,
+        which keeps one-step and many-step results identical, and no thread start-up cost.
+    """
+    m = np.asarray(matrix, dtype=np.float64)
+    v = np.asarray(vectors, dtype=np.float64)
+    vx, vy, vz = v[..., 0:1], v[..., 1:2], v[..., 2:3]
+    if m.ndim == 2:
+        return vx * m[:, 0] + vy * m[:, 1] + vz * m[:, 2]
+    return vx * m[..., :, 0] + vy * m[..., :, 1] + vz * m[..., :, 2]
+
+
+def cross(a: ArrayLike, b: ArrayLike) -> np.ndarray:
+    """Cross product ``a x b`` over the last axis (length 3), broadcasting leading axes.
+
+    Written out by components into a preallocated array: several times faster than
+    :func:`numpy.cross` or stacking for many short vectors, and bitwise equal to them.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
+    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    out[..., 0] = ay * bz - az * by
+    out[..., 1] = az * bx - ax * bz
+    out[..., 2] = ax * by - ay * bx
+    return out
+
+
+def quat_multiply(q_a: ArrayLike, q_b: ArrayLike) -> np.ndarray:
+    """Hamilton product ``q_a q_b`` (xyzw).
+
+    Parameters
+    ----------
+    q_a, q_b : array_like
+        (..., 4) quaternions; leading axes broadcast.
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 4) product; ``quat_rotate(q_a q_b, v) = quat_rotate(q_a, quat_rotate(q_b, v))``.
+    """
+    a = np.asarray(q_a, dtype=np.float64)
+    b = np.asarray(q_b, dtype=np.float64)
+    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    # the same expressions as _hamilton_product, on the last axis
+    out[..., 0] = aw * bx + ax * bw + ay * bz - az * by
+    out[..., 1] = aw * by - ax * bz + ay * bw + az * bx
+    out[..., 2] = aw * bz + ax * by - ay * bx + az * bw
+    out[..., 3] = aw * bw - ax * bx - ay * by - az * bz
+    return out
+
+
+def _hamilton_product(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """Hamilton product on component-first arrays (4, ...); ``out`` may not alias a or b."""
+    ax, ay, az, aw = a[0], a[1], a[2], a[3]
+    bx, by, bz, bw = b[0], b[1], b[2], b[3]
+    out[0] = aw * bx + ax * bw + ay * bz - az * by
+    out[1] = aw * by - ax * bz + ay * bw + az * bx
+    out[2] = aw * bz + ax * by - ay * bx + az * bw
+    out[3] = aw * bw - ax * bx - ay * by - az * bz
+
+
+def quat_conjugate(q: ArrayLike) -> np.ndarray:
+    """Conjugate (inverse of a unit quaternion), (..., 4) xyzw."""
+    conjugate = np.array(q, dtype=np.float64, copy=True)
+    conjugate[..., :3] *= -1.0
+    return conjugate
+
+
+def quat_rotate(q: ArrayLike, v: ArrayLike) -> np.ndarray:
+    """Rotate vectors: ``q v q*`` for unit q.
+
+    Parameters
+    ----------
+    q : array_like
+        (..., 4) unit quaternions xyzw.
+    v : array_like
+        (..., 3) vectors; leading axes broadcast with ``q``.
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3); with q the attitude, maps CRF components to inertial components.
+    """
+    q = np.asarray(q, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    vector = q[..., :3]
+    # v' = v + w t + u x t with t = 2 u x v (unit q), cheaper than two products
+    twice_cross = 2.0 * cross(vector, v)
+    return v + q[..., 3:4] * twice_cross + cross(vector, twice_cross)
+
+
+def quat_from_rotvec(rotvec_rad: ArrayLike) -> np.ndarray:
+    """Unit quaternion ``exp(rotvec / 2)`` of a rotation vector.
+
+    Parameters
+    ----------
+    rotvec_rad : array_like
+        (..., 3) rotation vector (axis times angle) [rad].
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 4) xyzw; exact to rounding also for angles down to zero (uses sinc).
+    """
+    rotvec = np.asarray(rotvec_rad, dtype=np.float64)
+    angle = np.sqrt(np.sum(rotvec * rotvec, axis=-1))
+    half = 0.5 * angle
+    # sin(angle/2)/angle = 0.5 sinc(half/pi) with numpy's normalised sinc; finite at 0
+    scale = 0.5 * np.sinc(half / np.pi)
+    out = np.empty((*rotvec.shape[:-1], 4))
+    out[..., :3] = rotvec * scale[..., None]
+    out[..., 3] = np.cos(half)
+    return out
+
+
+def rotvec_from_quat(q: ArrayLike) -> np.ndarray:
+    """Rotation vector (axis times angle, angle in [0, pi]) of a unit quaternion.
+
+    Parameters
+    ----------
+    q : array_like
+        (..., 4) unit quaternions xyzw; q and -q give the same result.
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., 3) rotation vector [rad].
+    """
+    q = np.asarray(q, dtype=np.float64)
+    sign = np.where(q[..., 3:4] < 0.0, -1.0, 1.0)
+    vector = q[..., :3] * sign
+    scalar = q[..., 3] * sign[..., 0]
+    sine_norm = np.sqrt(np.sum(vector * vector, axis=-1))
+    # atan2(s, w)/s -> 1/w as s -> 0, and atan2 keeps full relative accuracy for tiny s
+    safe_norm = np.where(sine_norm > 0.0, sine_norm, 1.0)
+    ratio = np.where(sine_norm > 0.0, np.arctan2(sine_norm, scalar) / safe_norm, 1.0 / scalar)
+    return 2.0 * ratio[..., None] * vector
+
+
+def quat_prefix_product(q: ArrayLike) -> np.ndarray:
+    """Inclusive running product ``P_k = q_0 q_1 ... q_k`` along axis 0.
+
+    Vectorised Hillis-Steele scan: ceil(log2 n) passes of one vectorised product each, with
+    the earlier factor always on the left (quaternion products do not commute).
+
+    Parameters
+    ----------
+    q : array_like
+        (n, 4) quaternions xyzw.
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, 4) running products.
+    """
+    # component-first (4, n) copy: contiguous component rows make each pass cheap
+    scan = np.array(np.asarray(q, dtype=np.float64).T, order="C")
+    combined = np.empty_like(scan)
+    count = scan.shape[1]
+    offset = 1
+    while offset < count:
+        _hamilton_product(scan[:, :-offset], scan[:, offset:], combined[:, offset:])
+        scan[:, offset:] = combined[:, offset:]
+        offset *= 2
+    return np.ascontiguousarray(scan.T)

@@ -1,0 +1,431 @@
+"""The spacecraft simulator: streaming (:meth:`Simulator.step`) and batch (:func:`simulate_batch`).
+
+One step advances from t_k to t_{k+1} = t_k + 1/fs with the commanded torque held constant over
+(t_k, t_{k+1}] and returns the sample stamped t_{k+1}:
+
+- star tracker: instantaneous attitude at t_{k+1} with white error;
+- GRS (integrating readout): the mean over the step, angular ``C_i (omega_{k+1} - omega_k)/dt``
+  and linear ``C_i (a_SC,k + omega_dot x d_i + w_m x (w_m x d_i))``, plus readout noise, converted
+  to the six electrode voltages through the true scale factors, plus voltage noise.
+
+A block of n steps is computed by the same code whether n = 1 (streaming) or n = whole run (batch);
+only the attitude solve differs in the order of its floating-point operations (see
+:mod:`.dynamics`), so streaming and batch agree to rounding and their noise draws bitwise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .config import SimConfig
+from .dynamics import propagate_attitude
+from .effects import Effect
+from .frames import apply_matrix, crf_to_tmrf
+from .grs import coupling_acceleration_m_s2, voltages_from_accelerations
+from .maneuver import SquareWaveManeuver
+from .noise import NoiseStreams
+from .star_tracker import star_tracker_covariance_rad2, star_tracker_measurement
+
+__all__ = [
+    "SimOutput",
+    "SimSample",
+    "SimTruth",
+    "Simulator",
+    "maneuver_torque_commands",
+    "simulate_batch",
+]
+
+
+@dataclass(frozen=True)
+class SimTruth:
+    """Ground truth of one sample, or of n samples with a leading axis n (CRF unless TMRF noted).
+
+    Attributes
+    ----------
+    quat_xyzw : numpy.ndarray
+        (4,) attitude at the sample time t_{k+1}.
+    omega_rad_s : numpy.ndarray
+        (3,) body rate at t_{k+1} [rad/s].
+    omega_dot_rad_s2 : numpy.ndarray
+        (3,) mean angular acceleration over the step [rad s^-2].
+    torque_command_n_m : numpy.ndarray
+        (3,) commanded torque held over the step [N m].
+    torque_applied_n_m : numpy.ndarray
+        (3,) applied torque (command + thruster torque noise + effects) [N m].
+    a_sc_m_s2 : numpy.ndarray
+        (3,) spacecraft non-gravitational acceleration over the step [m s^-2].
+    grs_angular_true : numpy.ndarray
+        (2, 3) per GRS, TMRF (phi, theta, psi), noise-free ``C_i omega_dot`` [rad s^-2].
+    grs_linear_true : numpy.ndarray
+        (2, 3) per GRS, TMRF, noise-free ``C_i (a_SC + A~ d_i)`` [m s^-2].
+    grs_linear_maneuver : numpy.ndarray
+        (2, 3) per GRS, TMRF, rotation-induced part ``C_i A~ d_i`` only [m s^-2].
+    grs_angular_meas : numpy.ndarray
+        (2, 3) angular readout with readout noise (and effects), before voltage conversion.
+    grs_linear_meas : numpy.ndarray
+        (2, 3) linear readout with readout noise (and effects), before voltage conversion.
+    grs_angular_scale_factors : numpy.ndarray
+        (2, 3) true (G_Pphi, G_Ptheta, G_Ppsi) used in the conversion [rad s^-2 V^-1].
+    grs_linear_scale_factors : numpy.ndarray
+        (2, 3) true (G_Px, G_Py, G_Pz) [m s^-2 V^-1].
+    com_offset_m : numpy.ndarray
+        (2, 3) true d_i in CRF [m].
+    """
+
+    quat_xyzw: np.ndarray
+    omega_rad_s: np.ndarray
+    omega_dot_rad_s2: np.ndarray
+    torque_command_n_m: np.ndarray
+    torque_applied_n_m: np.ndarray
+    a_sc_m_s2: np.ndarray
+    grs_angular_true: np.ndarray
+    grs_linear_true: np.ndarray
+    grs_linear_maneuver: np.ndarray
+    grs_angular_meas: np.ndarray
+    grs_linear_meas: np.ndarray
+    grs_angular_scale_factors: np.ndarray
+    grs_linear_scale_factors: np.ndarray
+    com_offset_m: np.ndarray
+
+    def select(self, index: int | slice) -> SimTruth:
+        """Index or slice every field along the leading (time) axis."""
+        return SimTruth(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
+
+@dataclass(frozen=True)
+class SimSample:
+    """One 10 Hz sample (what one :meth:`Simulator.step` returns).
+
+    Attributes
+    ----------
+    t_s : float
+        Sample time t_{k+1} [s].
+    st_quat_xyzw : numpy.ndarray
+        (4,) star-tracker attitude (orientation of the CRF in the inertial frame).
+    st_cov_rad2 : numpy.ndarray
+        (9,) row-major covariance of the star-tracker error about CRF X, Y, Z [rad^2]; always
+        ``diag(sigma^2)`` of the configured sigma, also when the noise is switched off.
+    voltages_v : numpy.ndarray
+        (2, 6) per GRS, vx1, vx2, vy1, vy2, vz1, vz2 [V].
+    truth : SimTruth
+        Ground truth.
+    """
+
+    t_s: float
+    st_quat_xyzw: np.ndarray
+    st_cov_rad2: np.ndarray
+    voltages_v: np.ndarray
+    truth: SimTruth
+
+
+@dataclass(frozen=True)
+class SimOutput:
+    """n consecutive samples: the fields of :class:`SimSample` with a leading axis n."""
+
+    t_s: np.ndarray
+    st_quat_xyzw: np.ndarray
+    st_cov_rad2: np.ndarray
+    voltages_v: np.ndarray
+    truth: SimTruth
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+    def __getitem__(self, index: int) -> SimSample:
+        """Sample ``index`` as a :class:`SimSample`."""
+        return SimSample(float(self.t_s[index]), self.st_quat_xyzw[index], self.st_cov_rad2[index],
+                         self.voltages_v[index], self.truth.select(index))
+
+    def slice(self, start: int | None = None, stop: int | None = None) -> SimOutput:
+        """Samples ``start:stop`` as a :class:`SimOutput` (views)."""
+        window = slice(start, stop)
+        return SimOutput(self.t_s[window], self.st_quat_xyzw[window], self.st_cov_rad2[window],
+                         self.voltages_v[window], self.truth.select(window))
+
+    @staticmethod
+    def concatenate(parts: Sequence[SimOutput]) -> SimOutput:
+        """Join consecutive outputs along time."""
+        def join(name: str, owner: str) -> np.ndarray:
+            return np.concatenate([getattr(getattr(p, owner) if owner else p, name) for p in parts])
+
+        truth = SimTruth(**{f.name: join(f.name, "truth") for f in fields(SimTruth)})
+        return SimOutput(join("t_s", ""), join("st_quat_xyzw", ""), join("st_cov_rad2", ""),
+                         join("voltages_v", ""), truth)
+
+
+def _as_commands(name: str, value: ArrayLike | None, count: int | None) -> np.ndarray:
+    array = np.asarray(value, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 3 or (count is not None and array.shape[0] != count):
+        expected = f"({count}, 3)" if count is not None else "(n, 3)"
+        raise ValueError(f"{name}: wrong shape {array.shape}, expected {expected}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name}: must be finite")
+    return array
+
+
+class Simulator:
+    """Streaming spacecraft simulator.
+
+    Parameters
+    ----------
+    config : SimConfig
+        Configuration (see :func:`.config.load_config`).
+    seed : int, optional
+        Run seed (non-negative); ``None`` draws one from the OS, available as :attr:`seed` so the
+        run stays reproducible.
+    t0_s : float
+        Time of the initial state [s].
+    effects : sequence of Effect
+        Injected effects, applied in order (see :mod:`.effects`).
+    """
+
+    def __init__(self, config: SimConfig, seed: int | None = None, t0_s: float = 0.0,
+                 effects: Sequence[Effect] = ()) -> None:
+        if not isinstance(config, SimConfig):
+            raise TypeError(f"config: expected SimConfig, got {type(config).__name__}")
+        if seed is None:
+            seed = int(np.random.SeedSequence().entropy)  # type: ignore[arg-type]
+        self._config = config
+        self._noise = NoiseStreams(config, seed)
+        self._seed = int(seed)
+        self._t0_s = float(t0_s)
+        self._dt_s = config.dt_s
+        self._step_index = 0
+        self._quat = np.array(config.spacecraft.initial_attitude_xyzw, dtype=np.float64)
+        self._omega = np.array(config.spacecraft.initial_rate_rad_s, dtype=np.float64)
+        self._inertia_inv = np.linalg.inv(config.spacecraft.inertia_kg_m2)
+        self._crf_to_tmrf = [crf_to_tmrf(s.grs_id, config.grs.alpha_rad) for s in config.grs.sensors]
+        self._st_cov_rad2 = star_tracker_covariance_rad2(config.noise.star_tracker.sigma_rad)
+        self._effects = tuple(effects)
+        for effect in self._effects:
+            effect.bind(config, self._seed)
+
+    # state and provenance ---------------------------------------------------------------------
+    @property
+    def config(self) -> SimConfig:
+        """The configuration."""
+        return self._config
+
+    @property
+    def seed(self) -> int:
+        """The run seed (record it: it reproduces the run)."""
+        return self._seed
+
+    @property
+    def t0_s(self) -> float:
+        """Time of the initial state [s]."""
+        return self._t0_s
+
+    @property
+    def step_index(self) -> int:
+        """Number of steps taken."""
+        return self._step_index
+
+    @property
+    def time_s(self) -> float:
+        """Current time t_k [s] (stamp of the last sample, t0 before the first step)."""
+        return self._t0_s + self._step_index * self._dt_s
+
+    @property
+    def quat_xyzw(self) -> np.ndarray:
+        """Current true attitude (4,) (copy)."""
+        return self._quat.copy()
+
+    @property
+    def omega_rad_s(self) -> np.ndarray:
+        """Current true body rate (3,) [rad/s] (copy)."""
+        return self._omega.copy()
+
+    @property
+    def effects(self) -> tuple[Effect, ...]:
+        """Injected effects."""
+        return self._effects
+
+    def provenance(self) -> dict[str, Any]:
+        """Everything needed to reproduce the run: seed, t0, configuration and effects."""
+        return {"seed": self._seed, "t0_s": self._t0_s, "config": self._config.to_dict(),
+                "effects": [effect.to_dict() for effect in self._effects]}
+
+    # stepping -------------------------------------------------------------------------------
+    def step(self, torque_cmd_n_m: ArrayLike, force_cmd_n: ArrayLike | None = None) -> SimSample:
+        """Advance one step holding the command (zero-order hold).
+
+        Parameters
+        ----------
+        torque_cmd_n_m : array_like
+            (3,) commanded torque about the CRF axes over (t_k, t_{k+1}] [N m].
+        force_cmd_n : array_like, optional
+            (3,) commanded force in CRF [N] (zero for the paper's maneuvers).
+
+        Returns
+        -------
+        SimSample
+            The sample stamped t_{k+1}.
+        """
+        torque = np.asarray(torque_cmd_n_m, dtype=np.float64).reshape(1, -1)
+        force = None if force_cmd_n is None else np.asarray(force_cmd_n, dtype=np.float64).reshape(1, -1)
+        return self.advance(torque, force)[0]
+
+    def advance(self, torque_cmd_n_m: ArrayLike, force_cmd_n: ArrayLike | None = None) -> SimOutput:
+        """Advance n steps at once (batch), continuing from the current state.
+
+        Parameters
+        ----------
+        torque_cmd_n_m : array_like
+            (n, 3) commanded torque of each step [N m].
+        force_cmd_n : array_like, optional
+            (n, 3) commanded force of each step, CRF [N].
+
+        Returns
+        -------
+        SimOutput
+            n samples stamped t_{k+1} .. t_{k+n}; identical (to rounding) to n calls of :meth:`step`.
+        """
+        command = _as_commands("torque_cmd_n_m", torque_cmd_n_m, None)
+        count = command.shape[0]
+        config = self._config
+        step_numbers = self._step_index + np.arange(count + 1, dtype=np.float64)
+        times = self._t0_s + step_numbers * self._dt_s
+        t_start, t_end = times[:-1], times[1:]
+        noise = self._noise.draw(count)
+
+        torque = command + noise.thruster_torque_n_m
+        inertia = config.spacecraft.inertia_kg_m2
+        for effect in self._effects:
+            torque = effect.applied_torque_n_m(t_start, torque)
+            inertia = effect.inertia_kg_m2(t_start, inertia)
+        # the configured J keeps its precomputed inverse; an effect's J is inverted per block
+        inertia_inv = self._inertia_inv if inertia is config.spacecraft.inertia_kg_m2 else None
+        attitude = propagate_attitude(self._quat, self._omega, torque, inertia, self._dt_s, inertia_inv)
+
+        force = noise.thruster_force_n
+        if force_cmd_n is not None:
+            force = force + _as_commands("force_cmd_n", force_cmd_n, count)
+        a_sc = force / config.spacecraft.mass_kg + noise.srp_m_s2
+        for effect in self._effects:
+            a_sc = effect.spacecraft_acceleration_m_s2(t_start, a_sc)
+
+        grs: dict[str, np.ndarray] = {}
+        for index, sensor in enumerate(config.grs.sensors):
+            readout = self._grs_block(index, sensor.grs_id, t_end, attitude.omega_dot_rad_s2,
+                                      attitude.omega_mid_rad_s, a_sc, noise)
+            for key, value in readout.items():
+                if key not in grs:
+                    grs[key] = np.empty((count, len(config.grs.sensors), value.shape[-1]))
+                grs[key][:, index] = value
+
+        st_quat = star_tracker_measurement(attitude.quat_xyzw, noise.star_tracker_rad)
+        for effect in self._effects:
+            st_quat = effect.star_tracker_quat_xyzw(t_end, st_quat)
+
+        self._quat = attitude.quat_xyzw[-1].copy()
+        self._omega = attitude.omega_rad_s[-1].copy()
+        self._step_index += count
+        truth = SimTruth(
+            quat_xyzw=attitude.quat_xyzw,
+            omega_rad_s=attitude.omega_rad_s,
+            omega_dot_rad_s2=attitude.omega_dot_rad_s2,
+            torque_command_n_m=command,
+            torque_applied_n_m=torque,
+            a_sc_m_s2=a_sc,
+            grs_angular_true=grs["angular_true"],
+            grs_linear_true=grs["linear_true"],
+            grs_linear_maneuver=grs["linear_maneuver"],
+            grs_angular_meas=grs["angular_meas"],
+            grs_linear_meas=grs["linear_meas"],
+            grs_angular_scale_factors=grs["angular_sf"],
+            grs_linear_scale_factors=grs["linear_sf"],
+            com_offset_m=grs["com_offset"],
+        )
+        return SimOutput(t_end, st_quat, np.tile(self._st_cov_rad2, (count, 1)), grs["voltages"], truth)
+
+    def _grs_block(self, index: int, grs_id: int, t_end: np.ndarray, omega_dot: np.ndarray,
+                   omega_mid: np.ndarray, a_sc: np.ndarray, noise: Any) -> dict[str, np.ndarray]:
+        """Readouts of one GRS over a block (arrays with leading axis n)."""
+        sensor = self._config.grs.sensors[index]
+        count = t_end.shape[0]
+        crf_to_tmrf_i = self._crf_to_tmrf[index]
+        com_offset = sensor.com_offset_m
+        angular_sf, linear_sf = sensor.angular_scale_factors, sensor.linear_scale_factors
+        for effect in self._effects:
+            com_offset = effect.com_offset_m(t_end, grs_id, com_offset)
+        coupling = coupling_acceleration_m_s2(omega_dot, omega_mid, com_offset)
+        angular_true = apply_matrix(crf_to_tmrf_i, omega_dot)
+        linear_maneuver = apply_matrix(crf_to_tmrf_i, coupling)
+        linear_true = apply_matrix(crf_to_tmrf_i, a_sc + coupling)
+        angular_meas = angular_true + noise.lfs_rotational_rad_s2[:, index]
+        linear_meas = (linear_true + noise.lfs_translational_m_s2[:, index]
+                       + noise.tm_environment_m_s2[:, index])
+        for effect in self._effects:
+            angular_meas, linear_meas = effect.grs_accelerations(t_end, grs_id, angular_meas, linear_meas)
+            angular_sf, linear_sf = effect.grs_scale_factors(t_end, grs_id, angular_sf, linear_sf)
+        voltages = voltages_from_accelerations(angular_meas, linear_meas, angular_sf, linear_sf)
+        voltages = voltages + noise.grs_voltage_v[:, index]
+        for effect in self._effects:
+            voltages = effect.grs_voltages_v(t_end, grs_id, voltages)
+        return {
+            "angular_true": angular_true,
+            "linear_true": linear_true,
+            "linear_maneuver": linear_maneuver,
+            "angular_meas": angular_meas,
+            "linear_meas": linear_meas,
+            "angular_sf": np.broadcast_to(angular_sf, (count, 3)),
+            "linear_sf": np.broadcast_to(linear_sf, (count, 3)),
+            "com_offset": np.broadcast_to(com_offset, (count, 3)),
+            "voltages": voltages,
+        }
+
+
+def simulate_batch(config: SimConfig, seed: int | None, torque_cmd_n_m: ArrayLike, t0_s: float = 0.0,
+                   force_cmd_n: ArrayLike | None = None, effects: Sequence[Effect] = ()) -> SimOutput:
+    """Simulate a whole experiment at once.
+
+    Parameters
+    ----------
+    config : SimConfig
+        Configuration.
+    seed : int or None
+        Run seed (see :class:`Simulator`).
+    torque_cmd_n_m : array_like
+        (n, 3) commanded torque held over each step [N m] (e.g. :func:`maneuver_torque_commands`).
+    t0_s : float
+        Initial time [s].
+    force_cmd_n : array_like, optional
+        (n, 3) commanded force [N].
+    effects : sequence of Effect
+        Injected effects.
+
+    Returns
+    -------
+    SimOutput
+        n samples, identical to n calls of :meth:`Simulator.step` with the same seed.
+    """
+    return Simulator(config, seed=seed, t0_s=t0_s, effects=effects).advance(torque_cmd_n_m, force_cmd_n)
+
+
+def maneuver_torque_commands(config: SimConfig, n_steps: int | None = None, t0_s: float = 0.0) -> np.ndarray:
+    """Torque commands of the configured maneuver, one per step, sampled at the step starts.
+
+    Parameters
+    ----------
+    config : SimConfig
+        Configuration (maneuver and sample rate).
+    n_steps : int, optional
+        Number of steps; default: up to the end of the maneuver, ``round((end - t0) fs)``.
+    t0_s : float
+        Initial time [s].
+
+    Returns
+    -------
+    numpy.ndarray
+        (n_steps, 3) command held over (t_k, t_{k+1}], t_k = t0 + k / fs [N m].
+    """
+    maneuver = SquareWaveManeuver.from_config(config.maneuver)
+    if n_steps is None:
+        n_steps = max(0, round((maneuver.end_s - t0_s) * config.sample_rate_hz))
+    return maneuver.torque_series(t0_s + np.arange(n_steps, dtype=np.float64) * config.dt_s)
