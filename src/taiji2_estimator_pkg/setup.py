@@ -20,5 +20,12 @@ setup(
     package_data={PACKAGE: ["py.typed"]},
     install_requires=["numpy", "scipy", "PyYAML", "matplotlib", "taiji2_runtime", "taiji2_sim_pkg"],
     python_requires=">=3.10",
-    entry_points={"console_scripts": ["scale_factor_estimator = taiji2_estimator_pkg.nodes.scale_factor_estimator:main", "com_offset_estimator = taiji2_estimator_pkg.nodes.com_offset_estimator:main"]},
+    entry_points={
+        "taiji2.commands": [
+            "experiment = taiji2_estimator_pkg.cli.experiment",
+            "calibrate = taiji2_estimator_pkg.cli.calibrate",
+            "diagnose = taiji2_estimator_pkg.cli.diagnose",
+        ],
+        "console_scripts": ["scale_factor_estimator = taiji2_estimator_pkg.nodes.scale_factor_estimator:main", "com_offset_estimator = taiji2_estimator_pkg.nodes.com_offset_estimator:main"],
+    },
 )
