@@ -179,3 +179,19 @@ def test_two_processes_with_the_embedded_runtime_exchange_messages_losslessly(tm
             proc.kill()
         executor.shutdown()
         rclpy.try_shutdown(context=ctx)
+
+
+def test_a_second_node_with_the_same_name_in_another_process_exits_with_one_line():
+    first = _start_commander()
+    try:
+        time.sleep(1.0)  # the first one is up and announced
+        second = subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", "run", "taiji2_sim_pkg",
+                                 "maneuver_commander"], env=python_subprocess_env(), capture_output=True, text=True,
+                                timeout=60)
+        assert second.returncode == 2
+        errors = [line for line in second.stderr.splitlines() if line.startswith("error:")]
+        assert len(errors) == 1 and "already runs in the graph" in errors[0], second.stderr
+        assert first.poll() is None  # the earlier node keeps running
+    finally:
+        first.send_signal(signal.SIGTERM)
+        first.wait(timeout=10)

@@ -22,6 +22,9 @@ from cyclonedds.topic import Topic
 from .arguments import RosArguments, parse_ros_args
 from .exceptions import DdsUnavailableError, NotInitializedException
 
+#: Shutdown reason prefix when a node turned out to duplicate another node's name.
+DUPLICATE_NODE_NAME = "duplicate node name"
+
 #: Highest participant index probed by unicast discovery (participants per host).
 MAX_PARTICIPANTS_PER_HOST = 60
 
@@ -112,6 +115,7 @@ class Context:
         self._on_shutdown: list[Callable[[], None]] = []
         self._graph_readers: tuple[BuiltinDataReader, BuiltinDataReader] | None = None
         self._graph: dict[str, dict[Any, Any]] = {"pub": {}, "sub": {}}
+        self._names: Any = None  # NodeNameRegistry, created with the participant
         self.domain_id = 0
         self.entities_version = 0
 
@@ -161,6 +165,7 @@ class Context:
             participant, self._participant = self._participant, None
             self._topics.clear()
             self._graph_readers = None
+            self._names = None
         if participant is not None:
             # Deleting the participant (and with it every reader/writer) sends the SPDP dispose,
             # so peers drop us at once instead of after the lease duration.
@@ -204,18 +209,32 @@ class Context:
             return topic
 
     def register_node_name(self, fqn: str) -> None:
+        """Claim a node name: refused at once within the process, announced to the graph."""
         from .exceptions import NodeNameNonUniqueError
+        from .node_names import NodeNameRegistry
 
         with self._lock:
             if fqn in self._node_names:
                 raise NodeNameNonUniqueError(f"a node named {fqn!r} already exists in this process")
+            if self._names is None:
+                self._names = NodeNameRegistry(self.participant())
+            self._names.announce(fqn)
             self._node_names.add(fqn)
             self.entities_version += 1
 
     def unregister_node_name(self, fqn: str) -> None:
         with self._lock:
             self._node_names.discard(fqn)
+            if self._names is not None and self.ok():
+                self._names.withdraw(fqn)
             self.entities_version += 1
+
+    def check_node_names(self) -> None:
+        """Shut down if one of this context's nodes duplicates an earlier node elsewhere in the graph."""
+        with self._lock:
+            conflict = self._names.conflict() if self._names is not None and self.ok() else None
+        if conflict is not None:
+            self.shutdown(f"{DUPLICATE_NODE_NAME}: {conflict}")
 
     def add_executor(self, executor: Any) -> None:
         with self._lock:

@@ -15,12 +15,13 @@ from typing import Any
 
 from cyclonedds.core import DDSException, GuardCondition, WaitSet
 
-from .context import Context, get_default_context
-from .exceptions import NotInitializedException
+from .context import DUPLICATE_NODE_NAME, Context, get_default_context
+from .exceptions import NodeNameNonUniqueError, NotInitializedException
 from .task import Future
 
 _TAKE_BATCH = 64
 _WAIT_SLICE_NS = 100_000_000
+_NAME_CHECK_PERIOD_S = 0.25
 
 
 class ExternalShutdownException(Exception):
@@ -46,6 +47,7 @@ class Executor:
         self._guard: GuardCondition | None = None
         self._waitset_version = -1
         self._is_shutdown = False
+        self._next_name_check = 0.0
         self._context.add_executor(self)
 
     @property
@@ -111,7 +113,10 @@ class Executor:
         while self._context.ok() and not self._is_shutdown:
             self.spin_once()
         if not self._context.ok():
-            raise ExternalShutdownException(self._context.shutdown_reason)
+            reason = self._context.shutdown_reason or ""
+            if reason.startswith(DUPLICATE_NODE_NAME):
+                raise NodeNameNonUniqueError(reason[len(DUPLICATE_NODE_NAME) + 2:])
+            raise ExternalShutdownException(reason)
 
     def spin_once(self, timeout_sec: float | None = None) -> None:
         """Run at most one ready callback, waiting up to ``timeout_sec`` (None: forever) for one."""
@@ -158,6 +163,12 @@ class Executor:
     def _collect(self) -> bool:
         if not self._context.ok():
             return False
+        now = time.monotonic()
+        if now >= self._next_name_check:
+            self._next_name_check = now + _NAME_CHECK_PERIOD_S
+            self._context.check_node_names()
+            if not self._context.ok():
+                return False
         for node in list(self._nodes):
             for subscription in list(node.subscriptions):
                 for msg in subscription.take(_TAKE_BATCH):
