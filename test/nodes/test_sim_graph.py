@@ -47,7 +47,7 @@ def _run_graph(context, executor, sim_context, sim_args, duration_s, commander=T
         cmd = ManeuverCommander(context=context, cli_args=["-p", "use_sim_time:=true", "-p", "lookahead_s:=1.0"])
         executor.add_node(cmd)
     sim = SpacecraftSim(context=sim_ctx, cli_args=["-p", f"duration_s:={duration_s}", "-p", "seed:=42",
-                                                    "-p", "wait_for_subscribers:=1", *sim_args])
+                                                    "-p", "wait_for_subscribers:=[1, 1, 1]", *sim_args])
     sim_ex.add_node(sim)
 
     def step_both() -> bool:

@@ -61,8 +61,10 @@ class NodeNameRegistry:
     def conflict(self) -> str | None:
         """A message naming the clash if one of this process's nodes is the later duplicate."""
         for sample in self._reader.take(N=256):
-            ident = (sample.fqn, sample.pid)
-            if sample.sample_info.instance_state == _ALIVE:
+            # a disposed or unregistered instance arrives as an InvalidSample holding only the key
+            keyed = getattr(sample, "key_sample", sample)
+            ident = (keyed.fqn, keyed.pid)
+            if sample.sample_info.instance_state == _ALIVE and hasattr(sample, "start_ns"):
                 self._others[ident] = sample
             else:
                 self._others.pop(ident, None)

@@ -93,8 +93,12 @@ class SpacecraftSim(rclpy.node.Node):
         self._command_timeout_s = dp("command_timeout_s", 2.0, _descriptor(
             "accelerated + sync: wall seconds to wait for a command before stepping with the last one",
             float_range=(0.0, 3600.0))).value
-        self._wait_subscribers = dp("wait_for_subscribers", 0, _descriptor(
-            "accelerated: start only once every raw topic has this many subscribers", int_range=(0, 1000))).value
+        self._wait_subscribers = dp("wait_for_subscribers", [0, 0, 0], _descriptor(
+            "accelerated: start only once /taiji2/star_tracker, /taiji2/grs1/voltages and /taiji2/grs2/voltages "
+            "have at least this many subscribers each", int_range=(0, 1000))).value
+        if len(self._wait_subscribers) != 3:
+            raise ValueError("wait_for_subscribers: expected 3 counts (star tracker, GRS1, GRS2), "
+                             f"got {list(self._wait_subscribers)}")
         self._exit_when_done = dp("exit_when_done", True, _descriptor("shut down after duration_s")).value
         self._publish_truth = dp("publish_truth", True, _descriptor("publish ground truth under /taiji2/sim/")).value
 
@@ -183,10 +187,8 @@ class SpacecraftSim(rclpy.node.Node):
             self._step_once()
 
     def _ready_to_start(self) -> bool:
-        if self._wait_subscribers <= 0:
-            return True
         pubs = [self._star_pub, *self._grs_pubs]
-        return all(p.get_subscription_count() >= self._wait_subscribers for p in pubs)
+        return all(p.get_subscription_count() >= n for p, n in zip(pubs, self._wait_subscribers, strict=True))
 
     def _publish_clock(self) -> None:
         clock = messages.rosgraph_msgs.Clock()
