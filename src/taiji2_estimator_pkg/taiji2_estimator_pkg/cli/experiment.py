@@ -19,8 +19,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from taiji2_estimator_pkg.report import EstimateTable, format_table
 from taiji2_runtime.ros import messages, rclpy
+
+from taiji2_estimator_pkg.report import EstimateTable, format_table
 
 _NS = 1_000_000_000
 
@@ -91,7 +92,10 @@ def main(args: argparse.Namespace) -> int:
     n_steps = round(args.duration_s * 10)
     overrides = [f"maneuver.duration_s={args.duration_s}", *args.override]
     source = ["-p", f"config_file:={args.config}"] if args.config else ["-p", f"layout:={args.layout}"]
-    subscribers = 2 + (1 if args.record else 0)
+    # who reads what: star tracker <- scale-factor estimator (+ com estimator for the paper method);
+    # each GRS <- both estimators; plus the recorder on every topic
+    extra = 1 if args.record else 0
+    subscribers = [1 + (args.method == "paper") + extra, 2 + extra, 2 + extra]
     est_args = ["--ros-args", *source, "-p", f"method:={args.method}"]
     commands = {
         "scale_factor_estimator": ["run", "taiji2_estimator_pkg", "scale_factor_estimator", *est_args],
@@ -123,7 +127,8 @@ def main(args: argparse.Namespace) -> int:
         while True:
             rclpy.spin_once(node, timeout_sec=0.1)
             # the simulator exits (0) when done; every other node runs until stopped
-            failed = [n for n, p in procs.items() if p.poll() is not None and (p.returncode != 0 or n != "spacecraft_sim")]
+            failed = [n for n, p in procs.items()
+                      if p.poll() is not None and (p.returncode != 0 or n != "spacecraft_sim")]
             if failed:
                 raise RuntimeError(f"node {failed[0]} exited with status {procs[failed[0]].returncode}; "
                                    f"see {out / (failed[0] + '.log')}")

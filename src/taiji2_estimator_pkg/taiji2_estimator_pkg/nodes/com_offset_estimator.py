@@ -1,0 +1,266 @@
+"""com_offset_estimator: running estimates of the c.m. offsets d_1, d_2 (CRF, m) and of d_1 - d_2.
+
+Subscribes to the raw GRS voltage topics (and the star tracker, for the paper method), to the
+scale-factor estimates of both GRS (their joint covariance is propagated into d) and to the
+filtered body rate of the scale-factor estimator. ``method: gls`` (default) uses the calibrated GRS
+angular acceleration in A~ and the common spacecraft acceleration seen by both GRS
+(:mod:`taiji2_estimator_pkg.core.com_offset`); ``method: paper`` runs the paper's filter over the
+data received so far every ``paper_batch_period_s``. Publishes ``/taiji2/estimates/grsN/com_offset``,
+``/taiji2/estimates/com_offset_difference`` (grs_id 0: d_1 - d_2) and ``/diagnostics``.
+Parameters: ``config/estimators.yaml``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from taiji2_runtime.entry import run_node
+from taiji2_runtime.ros import messages, rclpy
+
+from taiji2_estimator_pkg.checkpoint import load_checkpoint, save_checkpoint
+from taiji2_estimator_pkg.core.com_offset import (
+    ComOffsetEstimate,
+    ComOffsetEstimator,
+    ComOffsetOptions,
+    PaperComOffsetFilter,
+)
+from taiji2_estimator_pkg.epochs import EpochAssembler
+from taiji2_estimator_pkg.nodes import common
+
+GRS_IDS = (1, 2)
+
+
+class ComOffsetEstimatorNode(rclpy.node.Node):
+    """Estimates d_1, d_2 in CRF from the GRS linear readouts and the calibrated scale factors."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("com_offset_estimator", **node_kwargs)
+        self.p = common.declare_common(self)
+        self.paper_period_s = self.declare_parameter("paper_batch_period_s", 600.0, common.descriptor(
+            "method paper: rerun the paper's filter over all data every this many seconds of data [s]",
+            low=1.0, high=86400.0)).value
+        self.instrument = common.instrument_from(self.p)
+        gate = self.p["gate_probability"] if self.p["gate_probability"] > 0 else None
+        self.paper = self.p["method"] == "paper"
+        streams = ("star_tracker", "grs1", "grs2") if self.paper else ("grs1", "grs2")
+        self.estimator = (PaperComOffsetFilter(self.instrument, GRS_IDS) if self.paper
+                          else ComOffsetEstimator(self.instrument, GRS_IDS, ComOffsetOptions(gate_probability=gate)))
+        self.assembler = EpochAssembler(streams, int(self.p["max_epoch_lag_s"] * 1e9))
+        self.node_rejections = common.RejectionCounts()
+        self.scale_factor_msgs: dict[int, Any] = {}
+        self.scale_factors: tuple[np.ndarray, np.ndarray] | None = None
+        self.scale_factors_ns = -1
+        self.omega = np.full(3, np.nan)
+        self.history: list[tuple[float, np.ndarray | None, np.ndarray]] = []  # paper method only
+        self.last_t_ns = -1
+        self.last_publish_ns = -1
+        self.last_checkpoint_ns = -1
+        self.last_nis = float("nan")
+        self.last_data_wall = time.monotonic()
+        self.last_estimate: ComOffsetEstimate | None = None
+        self._resume()
+
+        t = messages.taiji2_msgs
+        qos = common.raw_qos()
+        for gid in GRS_IDS:
+            self.create_subscription(t.GrsVoltages, common.GRS_TOPICS[gid], lambda m, g=gid: self._on_grs(m, g), qos)
+            self.create_subscription(t.ScaleFactorEstimate, f"/taiji2/estimates/grs{gid}/scale_factors",
+                                     self._on_scale_factors, qos)
+        if self.paper:
+            self.create_subscription(t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
+        self.create_subscription(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, self._on_rate, qos)
+        self.pubs = {g: self.create_publisher(t.ComOffsetEstimate, f"/taiji2/estimates/grs{g}/com_offset", qos)
+                     for g in GRS_IDS}
+        self.diff_pub = self.create_publisher(t.ComOffsetEstimate, "/taiji2/estimates/com_offset_difference", qos)
+        self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
+        self.create_timer(1.0, self._publish_diagnostics,
+                          clock=rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME))
+        self.get_logger().info(f"method {self.p['method']}, nominal model {self.p['config_file'] or self.p['layout']}")
+
+    # -- checkpoints ---------------------------------------------------------------------------
+    def _resume(self) -> None:
+        path = self.p["checkpoint_file"]
+        state = load_checkpoint(path) if path else None
+        if state is None:
+            return
+        if state.get("method") != self.p["method"]:
+            raise ValueError(f"checkpoint_file {path}: written by method {state.get('method')!r}, "
+                             f"not {self.p['method']!r}")
+        if self.paper:
+            self.history = [(t, q, v) for t, q, v in state["history"]]
+        else:
+            self.estimator.load_state_dict(state["estimator"])
+        self.assembler.load_state_dict(state["assembler"])
+        self.node_rejections.counts = state["node_rejections"]
+        self.last_t_ns = int(state["t_ns"])
+        self.get_logger().info(f"resumed from checkpoint {path} at t = {state['t_ns'] / 1e9:.1f} s")
+
+    def save_checkpoint(self, t_ns: int) -> None:
+        path = self.p["checkpoint_file"]
+        if not path:
+            return
+        state: dict[str, Any] = {"method": self.p["method"], "t_ns": t_ns,
+                                 "assembler": self.assembler.state_dict(),
+                                 "node_rejections": self.node_rejections.counts}
+        if self.paper:
+            state["history"] = self.history
+        else:
+            state["estimator"] = self.estimator.state_dict()
+        save_checkpoint(path, state)
+        self.last_checkpoint_ns = t_ns
+
+    # -- input ---------------------------------------------------------------------------------
+    def _on_scale_factors(self, msg: Any) -> None:
+        if msg.grs_id not in GRS_IDS:
+            self.node_rejections.add("scale_factors", "grs_id_mismatch")
+            return
+        self.scale_factor_msgs[int(msg.grs_id)] = msg
+        msgs = [self.scale_factor_msgs.get(g) for g in GRS_IDS]
+        if any(m is None for m in msgs) or common.stamp_ns(msgs[0].header) != common.stamp_ns(msgs[1].header):
+            return
+        g = np.concatenate([np.asarray(m.scale_factors, dtype=np.float64) for m in msgs])
+        cov = np.zeros((6, 6))
+        cov[:3, :3] = np.reshape(msgs[0].covariance, (3, 3))
+        cov[3:, 3:] = np.reshape(msgs[1].covariance, (3, 3))
+        cov[:3, 3:] = np.reshape(msgs[0].cross_covariance, (3, 3))
+        cov[3:, :3] = cov[:3, 3:].T
+        if not np.all(np.isfinite(g)):
+            return  # the scale-factor estimator is not determined yet
+        self.scale_factors = (g, cov)
+        self.scale_factors_ns = common.stamp_ns(msgs[0].header)
+        if self.last_t_ns >= 0 and self.scale_factors_ns >= self.last_publish_ns:
+            self.publish_estimate(max(self.last_t_ns, self.last_publish_ns))  # new G: d moves with it
+
+    def _on_rate(self, msg: Any) -> None:
+        self.omega = np.array([msg.vector.x, msg.vector.y, msg.vector.z], dtype=np.float64)
+
+    def _on_star_tracker(self, msg: Any) -> None:
+        self._add("star_tracker", common.stamp_ns(msg.header), common.star_tracker_quaternion(msg))
+
+    def _on_grs(self, msg: Any, grs_id: int) -> None:
+        problem = common.grs_message_problem(msg, grs_id)
+        if problem is not None:
+            self.node_rejections.add(f"grs{grs_id}", problem)
+            self.get_logger().warn(f"rejected GrsVoltages on {common.GRS_TOPICS[grs_id]}: {problem}",
+                                   throttle_duration_sec=10.0)
+            return
+        self._add(f"grs{grs_id}", common.stamp_ns(msg.header), common.grs_voltages(msg))
+
+    def _add(self, stream: str, t_ns: int, payload: np.ndarray) -> None:
+        self.last_data_wall = time.monotonic()
+        for epoch in self.assembler.add(stream, t_ns, payload):
+            self._process(epoch)
+
+    def _process(self, epoch: Any) -> None:
+        voltages = {g: epoch.samples[f"grs{g}"] for g in GRS_IDS if f"grs{g}" in epoch.samples}
+        self.last_t_ns = epoch.t_ns
+        if self.paper:
+            v = np.full((2, 6), np.nan)
+            for g, values in voltages.items():
+                v[g - 1] = values
+            self.history.append((epoch.t_ns / 1e9, epoch.samples.get("star_tracker"), v))
+        else:
+            try:
+                report = self.estimator.update(epoch.t_ns / 1e9, voltages,
+                                               self.omega if np.all(np.isfinite(self.omega)) else None,
+                                               scale_factors=self.scale_factors)
+            except Exception as exc:  # never crash the graph on one epoch; keep what is estimated
+                self.node_rejections.add("epoch", f"error:{type(exc).__name__}")
+                self.get_logger().error(f"epoch {epoch.t_ns / 1e9:.1f} s skipped: {exc}", throttle_duration_sec=10.0)
+                return
+            if np.isfinite(report.nis):
+                self.last_nis = float(report.nis)
+            for stream, reason in report.rejections:
+                self.get_logger().warn(f"rejected {stream} at t = {epoch.t_ns / 1e9:.1f} s: {reason}",
+                                       throttle_duration_sec=10.0)
+        period_s = self.paper_period_s if self.paper else self.p["publish_period_s"]
+        period_ns = int(period_s * 1e9)
+        if self.last_publish_ns < 0 or epoch.t_ns // period_ns > self.last_publish_ns // period_ns:
+            self.publish_estimate(epoch.t_ns)
+        if self.last_checkpoint_ns < 0 or epoch.t_ns - self.last_checkpoint_ns >= self.p["checkpoint_period_s"] * 1e9:
+            self.save_checkpoint(epoch.t_ns)
+
+    # -- output --------------------------------------------------------------------------------
+    def _current_estimate(self) -> ComOffsetEstimate | None:
+        if self.scale_factors is None:
+            return None
+        if not self.paper:
+            return self.estimator.estimate(self.scale_factors)
+        if len(self.history) < 2:
+            return None
+        t = np.array([h[0] for h in self.history])
+        q = np.array([h[1] if h[1] is not None else np.full(4, np.nan) for h in self.history])
+        v = np.array([h[2] for h in self.history])
+        g, _ = self.scale_factors
+        return self.estimator.process_batch(t, q, v, {1: g[:3], 2: g[3:]})
+
+    def publish_estimate(self, t_ns: int) -> None:
+        try:
+            estimate = self._current_estimate()
+        except Exception as exc:  # keep the last estimate rather than crash
+            self.node_rejections.add("estimate", f"error:{type(exc).__name__}")
+            self.get_logger().error(f"estimate at {t_ns / 1e9:.1f} s failed: {exc}", throttle_duration_sec=10.0)
+            return
+        self.last_publish_ns = t_ns
+        if estimate is None:
+            return
+        self.last_estimate = estimate
+        rejected = common.total(self.node_rejections.merged(estimate.rejected))
+        t = messages.taiji2_msgs
+        for gid in GRS_IDS:
+            d, cov = estimate.of(gid)
+            self.pubs[gid].publish(self._message(t, gid, t_ns, d, cov, estimate, rejected))
+        diff, diff_cov = estimate.difference()
+        self.diff_pub.publish(self._message(t, 0, t_ns, diff, diff_cov, estimate, rejected))
+
+    def _message(self, t: Any, gid: int, t_ns: int, d: np.ndarray, cov: np.ndarray, estimate: ComOffsetEstimate,
+                 rejected: int) -> Any:
+        msg = t.ComOffsetEstimate(grs_id=gid, method=estimate.method)
+        common.set_stamp(msg.header, t_ns)
+        msg.header.frame_id = "crf"
+        msg.offset.x, msg.offset.y, msg.offset.z = (float(v) for v in d)
+        msg.covariance = [float(v) for v in np.asarray(cov).ravel()]
+        msg.samples_used = int(estimate.n_samples)
+        msg.samples_rejected = int(rejected)
+        msg.nis = self.last_nis
+        msg.nis_mean = float(estimate.nis_mean)
+        return msg
+
+    def _publish_diagnostics(self) -> None:
+        estimate = self.last_estimate
+        counts = self.node_rejections.merged(estimate.rejected if estimate else {})
+        used = int(estimate.n_samples) if estimate else 0
+        starved = time.monotonic() - self.last_data_wall > self.p["starved_after_s"]
+        level, text = common.consistency_level(estimate.nis_mean if estimate else float("nan"),
+                                               bool(estimate and estimate.determined), starved,
+                                               common.total(counts), used)
+        if self.scale_factors is None and not starved:
+            level, text = "OK", "waiting for the scale-factor estimates"
+        status = common.diagnostic("com_offset_estimator", level, text, {
+            "method": self.p["method"], "samples_used": used, "rejected": counts,
+            "nis_mean": None if estimate is None else estimate.nis_mean})
+        array = messages.diagnostic_msgs.DiagnosticArray(status=[status])
+        common.set_stamp(array.header, max(self.last_publish_ns, 0))
+        self.diag_pub.publish(array)
+
+    def destroy_node(self) -> None:
+        try:
+            for epoch in self.assembler.flush():
+                self._process(epoch)
+            if self.last_t_ns >= 0 and self.context.ok():
+                self.publish_estimate(self.last_t_ns)
+            if self.last_t_ns >= 0:
+                self.save_checkpoint(self.last_t_ns)
+        finally:
+            super().destroy_node()
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(ComOffsetEstimatorNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

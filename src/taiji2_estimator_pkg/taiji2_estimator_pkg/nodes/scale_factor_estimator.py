@@ -1,0 +1,208 @@
+"""scale_factor_estimator: running estimates of the angular scale factors of both GRS.
+
+Subscribes to the raw star-tracker and GRS voltage topics only, aligns them into epochs by stamp,
+feeds :mod:`taiji2_estimator_pkg.core.scale_factor` (``method: gls`` the default two-stage filter
+with honest covariance, or ``method: paper``), and publishes per GRS
+``/taiji2/estimates/grsN/scale_factors`` (with the cross-covariance of the joint estimate), the
+filtered body rate on ``/taiji2/estimates/angular_rate`` for the c.m.-offset estimator, and
+``/diagnostics``. Bad input is rejected, counted and reported; the estimate goes on from good data.
+Parameters: ``config/estimators.yaml``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from taiji2_runtime.entry import run_node
+from taiji2_runtime.ros import messages, rclpy
+
+from taiji2_estimator_pkg.checkpoint import load_checkpoint, save_checkpoint
+from taiji2_estimator_pkg.core.scale_factor import (
+    PaperScaleFactorFilter,
+    PaperScaleFactorOptions,
+    ScaleFactorEstimate,
+    ScaleFactorEstimator,
+    ScaleFactorOptions,
+)
+from taiji2_estimator_pkg.epochs import EpochAssembler
+from taiji2_estimator_pkg.nodes import common
+
+GRS_IDS = (1, 2)
+STREAMS = ("star_tracker", "grs1", "grs2")
+
+
+def make_scale_factor_estimator(instrument: Any, method: str, gate_probability: float) -> Any:
+    """The core estimator for ``method`` (both GRS jointly)."""
+    gate = gate_probability if gate_probability > 0 else None
+    if method == "paper":
+        return PaperScaleFactorFilter(instrument, GRS_IDS, PaperScaleFactorOptions(gate_probability=gate))
+    return ScaleFactorEstimator(instrument, GRS_IDS, ScaleFactorOptions(gate_probability=gate))
+
+
+class ScaleFactorEstimatorNode(rclpy.node.Node):
+    """Estimates (G_Pphi, G_Ptheta, G_Ppsi) of GRS1 and GRS2 from the star tracker and the voltages."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("scale_factor_estimator", **node_kwargs)
+        self.p = common.declare_common(self)
+        self.instrument = common.instrument_from(self.p)
+        self.estimator = make_scale_factor_estimator(self.instrument, self.p["method"], self.p["gate_probability"])
+        self.assembler = EpochAssembler(STREAMS, int(self.p["max_epoch_lag_s"] * 1e9))
+        self.node_rejections = common.RejectionCounts()
+        self.last_nis = float("nan")
+        self.last_publish_ns = -1
+        self.last_checkpoint_ns = -1
+        self.last_data_wall = time.monotonic()
+        self.last_estimate: ScaleFactorEstimate | None = None
+        self._resume()
+
+        t = messages.taiji2_msgs
+        qos = common.raw_qos()
+        self.create_subscription(t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
+        for gid in GRS_IDS:
+            self.create_subscription(t.GrsVoltages, common.GRS_TOPICS[gid], lambda m, g=gid: self._on_grs(m, g), qos)
+        self.estimate_pubs = {g: self.create_publisher(t.ScaleFactorEstimate,
+                                                       f"/taiji2/estimates/grs{g}/scale_factors", qos)
+                              for g in GRS_IDS}
+        self.rate_pub = self.create_publisher(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, qos)
+        self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
+        self.create_timer(1.0, self._publish_diagnostics,
+                          clock=rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME))
+        self.get_logger().info(f"method {self.p['method']}, nominal model "
+                               f"{self.p['config_file'] or self.p['layout']}, publishing every "
+                               f"{self.p['publish_period_s']} s of data")
+
+    # -- checkpoints ---------------------------------------------------------------------------
+    def _resume(self) -> None:
+        path = self.p["checkpoint_file"]
+        state = load_checkpoint(path) if path else None
+        if state is None:
+            return
+        if state.get("method") != self.p["method"]:
+            raise ValueError(f"checkpoint_file {path}: written by method {state.get('method')!r}, "
+                             f"not {self.p['method']!r}")
+        self.estimator.load_state_dict(state["estimator"])
+        self.assembler.load_state_dict(state["assembler"])
+        self.node_rejections.counts = state["node_rejections"]
+        self.get_logger().info(f"resumed from checkpoint {path} at t = {state['t_ns'] / 1e9:.1f} s")
+
+    def save_checkpoint(self, t_ns: int) -> None:
+        path = self.p["checkpoint_file"]
+        if path:
+            save_checkpoint(path, {"method": self.p["method"], "t_ns": t_ns,
+                                   "estimator": self.estimator.state_dict(),
+                                   "assembler": self.assembler.state_dict(),
+                                   "node_rejections": self.node_rejections.counts})
+            self.last_checkpoint_ns = t_ns
+
+    # -- input -----------------------------------------------------------------------------------
+    def _on_star_tracker(self, msg: Any) -> None:
+        if msg.header.frame_id not in ("crf", ""):
+            self.node_rejections.add("star_tracker", "frame_id_mismatch")
+            return
+        self._add("star_tracker", common.stamp_ns(msg.header), common.star_tracker_quaternion(msg))
+
+    def _on_grs(self, msg: Any, grs_id: int) -> None:
+        problem = common.grs_message_problem(msg, grs_id)
+        if problem is not None:
+            self.node_rejections.add(f"grs{grs_id}", problem)
+            self.get_logger().warn(f"rejected GrsVoltages on {common.GRS_TOPICS[grs_id]}: {problem} "
+                                   f"(grs_id {msg.grs_id}, frame_id {msg.header.frame_id!r})",
+                                   throttle_duration_sec=10.0)
+            return
+        self._add(f"grs{grs_id}", common.stamp_ns(msg.header), common.grs_voltages(msg))
+
+    def _add(self, stream: str, t_ns: int, payload: np.ndarray) -> None:
+        self.last_data_wall = time.monotonic()
+        for epoch in self.assembler.add(stream, t_ns, payload):
+            self._process(epoch)
+
+    def _process(self, epoch: Any) -> None:
+        voltages = {g: epoch.samples[f"grs{g}"] for g in GRS_IDS if f"grs{g}" in epoch.samples}
+        try:
+            report = self.estimator.update(epoch.t_ns / 1e9, epoch.samples.get("star_tracker"), voltages)
+        except Exception as exc:  # never crash the graph on one epoch; keep what is estimated
+            self.node_rejections.add("epoch", f"error:{type(exc).__name__}")
+            self.get_logger().error(f"epoch {epoch.t_ns / 1e9:.1f} s skipped: {exc}", throttle_duration_sec=10.0)
+            return
+        for stream, reason in report.rejections:
+            self.get_logger().warn(f"rejected {stream} sample at t = {epoch.t_ns / 1e9:.1f} s: {reason}",
+                                   throttle_duration_sec=10.0)
+        if np.isfinite(report.nis):
+            self.last_nis = float(report.nis)
+        # publish at the first epoch of every publish period (stamps aligned to the period)
+        period_ns = int(self.p["publish_period_s"] * 1e9)
+        if self.last_publish_ns < 0 or epoch.t_ns // period_ns > self.last_publish_ns // period_ns:
+            self.publish_estimate(epoch.t_ns)
+        if self.last_checkpoint_ns < 0 or epoch.t_ns - self.last_checkpoint_ns >= self.p["checkpoint_period_s"] * 1e9:
+            self.save_checkpoint(epoch.t_ns)
+
+    # -- output ----------------------------------------------------------------------------------
+    def publish_estimate(self, t_ns: int) -> None:
+        estimate = self.estimator.estimate()
+        self.last_estimate = estimate
+        self.last_publish_ns = t_ns
+        rejected = common.total(self.node_rejections.merged(estimate.rejected))
+        t = messages.taiji2_msgs
+        for index, gid in enumerate(GRS_IDS):
+            msg = t.ScaleFactorEstimate(grs_id=gid, method=estimate.method)
+            common.set_stamp(msg.header, t_ns)
+            msg.header.frame_id = common.GRS_FRAMES[gid]
+            block = slice(3 * index, 3 * index + 3)
+            other = slice(3 * (1 - index), 3 * (1 - index) + 3)
+            msg.scale_factors = [float(v) for v in estimate.values[block]]
+            msg.covariance = [float(v) for v in estimate.covariance[block, block].ravel()]
+            msg.cross_covariance = [float(v) for v in estimate.covariance[block, other].ravel()]
+            msg.samples_used = int(estimate.n_samples)
+            msg.samples_rejected = int(rejected)
+            msg.nis = self.last_nis
+            msg.nis_mean = float(estimate.nis_mean)
+            self.estimate_pubs[gid].publish(msg)
+        rate = getattr(self.estimator, "rate_estimate", None)
+        omega = rate() if rate is not None else np.full(3, np.nan)
+        if np.all(np.isfinite(omega)):
+            msg = messages.geometry_msgs.Vector3Stamped()
+            common.set_stamp(msg.header, t_ns)
+            msg.header.frame_id = "crf"
+            msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in omega)
+            self.rate_pub.publish(msg)
+
+    def _publish_diagnostics(self) -> None:
+        estimate = self.last_estimate
+        counts = self.node_rejections.merged(estimate.rejected if estimate else {}, {"epoch_alignment": {
+            f"{s}:{r}": n for s, reasons in self.assembler.refused.items() for r, n in reasons.items()}})
+        used = int(estimate.n_samples) if estimate else 0
+        starved = time.monotonic() - self.last_data_wall > self.p["starved_after_s"]
+        level, text = common.consistency_level(estimate.nis_mean if estimate else float("nan"),
+                                               bool(estimate and estimate.determined), starved,
+                                               common.total(counts), used)
+        status = common.diagnostic("scale_factor_estimator", level, text, {
+            "method": self.p["method"], "samples_used": used, "rejected": counts,
+            "nis_mean": None if estimate is None else estimate.nis_mean,
+            "last_stamp_s": None if estimate is None else estimate.t_s})
+        array = messages.diagnostic_msgs.DiagnosticArray(status=[status])
+        common.set_stamp(array.header, self.last_publish_ns if self.last_publish_ns > 0 else 0)
+        self.diag_pub.publish(array)
+
+    def destroy_node(self) -> None:
+        # end of data: process what is still waiting for a late stream, publish and checkpoint
+        try:
+            for epoch in self.assembler.flush():
+                self._process(epoch)
+            if self.last_publish_ns >= 0 and self.context.ok():
+                self.publish_estimate(self.last_publish_ns)
+            if self.last_publish_ns >= 0:
+                self.save_checkpoint(self.last_publish_ns)
+        finally:
+            super().destroy_node()
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(ScaleFactorEstimatorNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

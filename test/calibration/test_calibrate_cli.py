@@ -1,0 +1,85 @@
+"""`taiji2 calibrate BAG` on contract bags written by another tool: JSON schema, numbers, bad input."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import numpy as np
+import pytest
+from conftest import PYTHON, python_subprocess_env
+from contract_bags import simulated_data, write_ground_segment_bag
+from taiji2_estimator_pkg.calibration import align_streams, calibrate
+from taiji2_estimator_pkg.core.instrument import InstrumentModel
+from taiji2_sim_pkg.core.config import load_config
+from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
+
+DURATION_S = 2400.0
+
+
+@pytest.fixture(scope="module")
+def simulated():
+    config = load_config("type1", overrides={"maneuver.duration_s": DURATION_S})
+    n = round(DURATION_S * config.sample_rate_hz)
+    return simulate_batch(config, 11, maneuver_torque_commands(config, n))
+
+
+@pytest.fixture(scope="module")
+def contract_bag(tmp_path_factory, simulated):
+    path = tmp_path_factory.mktemp("bags") / "experiment"
+    write_ground_segment_bag(path, "mcap", simulated_data(simulated))
+    return path
+
+
+def _calibrate(*args):
+    return subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", "calibrate", *map(str, args)],
+                          env=python_subprocess_env(), capture_output=True, text=True, timeout=300)
+
+
+def test_json_output_has_the_documented_keys_and_matches_the_core(contract_bag, simulated):
+    proc = _calibrate(contract_bag, "--layout", "type1", "--json")
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    for grs in ("grs1", "grs2"):
+        entry = result[grs]
+        assert np.shape(entry["scale_factors"]) == (3,) and np.shape(entry["scale_factors_cov"]) == (3, 3)
+        assert np.shape(entry["com_offset"]) == (3,) and np.shape(entry["com_offset_cov"]) == (3, 3)
+        assert entry["samples_used"] > 0 and "samples_rejected" in entry
+    assert np.shape(result["com_offset_difference"]) == (3,)
+    assert np.shape(result["com_offset_difference_cov"]) == (3, 3)
+    # the same numbers as the core on the simulator's arrays (the bag round trip is lossless)
+    instrument = InstrumentModel.from_layout("type1")
+    stamps = 1_700_000_000 * 10**9 + np.rint(simulated.t_s * 1e9).astype(np.int64)
+    record = align_streams(stamps, simulated.st_quat_xyzw,
+                           {g: (stamps, simulated.voltages_v[:, g - 1]) for g in (1, 2)}, 10.0)
+    direct = calibrate(record, instrument).to_dict()
+    for grs in ("grs1", "grs2"):
+        np.testing.assert_allclose(result[grs]["scale_factors"], direct[grs]["scale_factors"], rtol=1e-12)
+        np.testing.assert_allclose(result[grs]["com_offset"], direct[grs]["com_offset"], rtol=1e-9, atol=1e-12)
+    # and close to the truth: within 4 sigma (seeded; a 4-sigma miss has probability ~6e-5 per parameter)
+    truth_g = simulated.truth.grs_angular_scale_factors[-1]
+    for i, grs in enumerate(("grs1", "grs2")):
+        sigma = np.sqrt(np.diag(result[grs]["scale_factors_cov"]))
+        assert np.all(np.abs(np.array(result[grs]["scale_factors"]) - truth_g[i]) < 4 * sigma)
+
+
+def test_human_table_names_the_parameters(contract_bag):
+    proc = _calibrate(contract_bag, "--layout", "type1")
+    assert proc.returncode == 0, proc.stderr
+    for word in ("G_Pphi", "G_Ppsi", "d1-d2", "real time", "/taiji2/star_tracker"):
+        assert word in proc.stdout
+
+
+@pytest.mark.parametrize("make_bad", ["not_a_bag", "missing_topic"])
+def test_bad_bags_give_one_line_errors(tmp_path, make_bad, simulated):
+    path = tmp_path / "bad"
+    if make_bad == "not_a_bag":
+        path.mkdir()
+        (path / "readme.txt").write_text("not a bag")
+    else:
+        write_ground_segment_bag(path, "mcap", simulated_data(simulated.slice(0, 600)),
+                                 skip=("/taiji2/grs2/voltages",))
+    proc = _calibrate(path, "--json")
+    assert proc.returncode == 2
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and str(path) in lines[0] and "Traceback" not in proc.stderr
