@@ -57,6 +57,7 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         self.history: list[tuple[float, np.ndarray | None, np.ndarray]] = []  # paper method only
         self.last_t_ns = -1
         self.last_publish_ns = -1
+        self.last_stamp_ns = -1  # stamp of the last published estimate
         self.last_checkpoint_ns = -1
         self.last_nis = float("nan")
         self.last_data_wall = time.monotonic()
@@ -131,8 +132,8 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
             return  # the scale-factor estimator is not determined yet
         self.scale_factors = (g, cov)
         self.scale_factors_ns = common.stamp_ns(msgs[0].header)
-        if self.last_t_ns >= 0 and self.scale_factors_ns >= self.last_publish_ns:
-            self.publish_estimate(max(self.last_t_ns, self.last_publish_ns))  # new G: d moves with it
+        if self.last_t_ns >= 0 and min(self.last_t_ns, self.scale_factors_ns) > self.last_stamp_ns:
+            self.publish_estimate(self.last_t_ns)  # a newer G: d moves with it
 
     def _on_rate(self, msg: Any) -> None:
         self.omega = np.array([msg.vector.x, msg.vector.y, msg.vector.z], dtype=np.float64)
@@ -198,6 +199,11 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         return self.estimator.process_batch(t, q, v, {1: g[:3], 2: g[3:]})
 
     def publish_estimate(self, t_ns: int) -> None:
+        """Publish d from the data up to ``t_ns`` and the latest scale factors.
+
+        The stamp is the earlier of the two: an estimate is only as current as both the data and
+        the scale factors it was computed with (the scale-factor estimator may lag the GRS data).
+        """
         try:
             estimate = self._current_estimate()
         except Exception as exc:  # keep the last estimate rather than crash
@@ -208,13 +214,15 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         if estimate is None:
             return
         self.last_estimate = estimate
+        stamp = min(t_ns, self.scale_factors_ns)
+        self.last_stamp_ns = stamp
         rejected = common.total(self.node_rejections.merged(estimate.rejected))
         t = messages.taiji2_msgs
         for gid in GRS_IDS:
             d, cov = estimate.of(gid)
-            self.pubs[gid].publish(self._message(t, gid, t_ns, d, cov, estimate, rejected))
+            self.pubs[gid].publish(self._message(t, gid, stamp, d, cov, estimate, rejected))
         diff, diff_cov = estimate.difference()
-        self.diff_pub.publish(self._message(t, 0, t_ns, diff, diff_cov, estimate, rejected))
+        self.diff_pub.publish(self._message(t, 0, stamp, diff, diff_cov, estimate, rejected))
 
     def _message(self, t: Any, gid: int, t_ns: int, d: np.ndarray, cov: np.ndarray, estimate: ComOffsetEstimate,
                  rejected: int) -> Any:
