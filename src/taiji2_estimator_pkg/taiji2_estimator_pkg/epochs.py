@@ -1,10 +1,12 @@
 """Alignment of the raw streams (star tracker, GRS1, GRS2) into epochs by header stamp.
 
-Messages of each stream arrive in stamp order, but the streams interleave arbitrarily and any of
-them may drop samples. An epoch is released, in stamp order, once every stream has either
-delivered its sample for that stamp or moved past it, or once it lags the newest stamp seen by more
-than ``max_lag_ns`` (a stream that went silent). Duplicate and out-of-order stamps of a stream are
-refused and counted. Plain Python: no middleware.
+Messages of each stream arrive in stamp order, but the streams interleave arbitrarily: how far one
+stream runs ahead of another depends on transport and executor batching (a bag replayed as fast as
+possible can put one topic many seconds of stamps ahead). So an epoch is released, in stamp order,
+once every stream has either delivered its sample for that stamp or moved past it; a stream that
+goes silent (no message for ``max_silence_s`` of wall time, e.g. a star-tracker dropout or a dead
+sensor) stops holding epochs back. ``max_pending`` bounds memory. Duplicate and out-of-order stamps
+of a stream are refused and counted. Plain Python: no middleware.
 """
 
 from __future__ import annotations
@@ -23,21 +25,26 @@ class Epoch:
 
 
 class EpochAssembler:
-    """Collects per-stream samples and releases complete or expired epochs in stamp order.
+    """Collects per-stream samples and releases epochs in stamp order.
 
     Parameters
     ----------
     streams : sequence of str
         Stream names, e.g. ``("star_tracker", "grs1", "grs2")``.
-    max_lag_ns : int
-        An incomplete epoch older than the newest stamp by more than this is released anyway [ns].
+    max_silence_s : float
+        A stream without a message for this long (wall clock) no longer holds epochs back [s].
+    max_pending : int
+        At most this many epochs wait; the oldest is released beyond it.
     """
 
-    def __init__(self, streams: Sequence[str], max_lag_ns: int) -> None:
+    def __init__(self, streams: Sequence[str], max_silence_s: float, max_pending: int = 200_000) -> None:
         self.streams = tuple(streams)
-        self.max_lag_ns = int(max_lag_ns)
+        self.max_silence_s = float(max_silence_s)
+        self.max_pending = int(max_pending)
         self._pending: dict[int, Epoch] = {}
         self._latest: dict[str, int] = {s: -1 for s in self.streams}
+        self._heard: dict[str, float] = {}
+        self._first_heard_s: float | None = None
         self._released_ns = -1
         self.refused: dict[str, dict[str, int]] = {}
 
@@ -45,10 +52,13 @@ class EpochAssembler:
         counts = self.refused.setdefault(stream, {})
         counts[reason] = counts.get(reason, 0) + 1
 
-    def add(self, stream: str, t_ns: int, payload: Any) -> list[Epoch]:
-        """Add a sample; returns the epochs that became ready, oldest first."""
+    def add(self, stream: str, t_ns: int, payload: Any, now_s: float) -> list[Epoch]:
+        """Add a sample received at wall time ``now_s`` [s]; returns the epochs now ready, oldest first."""
         if stream not in self._latest:
             raise KeyError(f"unknown stream {stream!r}")
+        self._heard[stream] = now_s
+        if self._first_heard_s is None:
+            self._first_heard_s = now_s
         if t_ns == self._latest[stream]:
             self._refuse(stream, "duplicate_stamp")
             return []
@@ -57,18 +67,20 @@ class EpochAssembler:
             return []
         self._latest[stream] = t_ns
         self._pending.setdefault(t_ns, Epoch(t_ns)).samples[stream] = payload
-        return self._ready()
+        return self.expire(now_s)
 
-    def _ready(self) -> list[Epoch]:
+    def expire(self, now_s: float) -> list[Epoch]:
+        """The epochs ready at wall time ``now_s``: complete, passed by every stream, or waiting only
+        for silent streams (call periodically so that a dropout does not stall the output)."""
+        # a stream never heard counts from the first message of any stream
+        start = self._first_heard_s if self._first_heard_s is not None else now_s
+        silent = {s for s in self.streams if now_s - self._heard.get(s, start) >= self.max_silence_s}
         released: list[Epoch] = []
-        newest = max(self._latest.values())
-        slowest = min(self._latest.values())
         for t_ns in sorted(self._pending):
             epoch = self._pending[t_ns]
-            complete = len(epoch.samples) == len(self.streams)
-            passed = t_ns <= slowest  # every stream delivered or moved past this stamp
-            expired = newest - t_ns > self.max_lag_ns
-            if not (complete or passed or expired):
+            waiting = [s for s in self.streams if s not in epoch.samples and self._latest[s] < t_ns]
+            overflow = len(self._pending) > self.max_pending
+            if waiting and not overflow and not all(s in silent for s in waiting):
                 break
             released.append(self._pending.pop(t_ns))
             self._released_ns = t_ns

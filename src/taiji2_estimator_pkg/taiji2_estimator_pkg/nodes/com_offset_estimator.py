@@ -42,13 +42,17 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         self.paper_period_s = self.declare_parameter("paper_batch_period_s", 600.0, common.descriptor(
             "method paper: rerun the paper's filter over all data every this many seconds of data [s]",
             low=1.0, high=86400.0)).value
+        self.use_rate = self.declare_parameter("use_rate_estimate", False, common.descriptor(
+            "use the scale-factor estimator's filtered body rate in the centripetal term omega x (omega x d); "
+            "off, the term is neglected (|omega|^2 |d| ~ 1e-14 m s^-2 at calibration rates, far below the "
+            "noise) and a replayed bag reproduces the live estimate exactly, independent of message timing")).value
         self.instrument = common.instrument_from(self.p)
         gate = self.p["gate_probability"] if self.p["gate_probability"] > 0 else None
         self.paper = self.p["method"] == "paper"
         streams = ("star_tracker", "grs1", "grs2") if self.paper else ("grs1", "grs2")
         self.estimator = (PaperComOffsetFilter(self.instrument, GRS_IDS) if self.paper
                           else ComOffsetEstimator(self.instrument, GRS_IDS, ComOffsetOptions(gate_probability=gate)))
-        self.assembler = EpochAssembler(streams, int(self.p["max_epoch_lag_s"] * 1e9))
+        self.assembler = EpochAssembler(streams, self.p["max_stream_silence_s"])
         self.node_rejections = common.RejectionCounts()
         self.scale_factor_msgs: dict[int, Any] = {}
         self.scale_factors: tuple[np.ndarray, np.ndarray] | None = None
@@ -72,13 +76,15 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
                                      self._on_scale_factors, qos)
         if self.paper:
             self.create_subscription(t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
-        self.create_subscription(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, self._on_rate, qos)
+        if self.use_rate:
+            self.create_subscription(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, self._on_rate, qos)
         self.pubs = {g: self.create_publisher(t.ComOffsetEstimate, f"/taiji2/estimates/grs{g}/com_offset", qos)
                      for g in GRS_IDS}
         self.diff_pub = self.create_publisher(t.ComOffsetEstimate, "/taiji2/estimates/com_offset_difference", qos)
         self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
-        self.create_timer(1.0, self._publish_diagnostics,
-                          clock=rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME))
+        steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
+        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
+        self.create_timer(0.5, self._release_silent, clock=steady)
         self.get_logger().info(f"method {self.p['method']}, nominal model {self.p['config_file'] or self.p['layout']}")
 
     # -- checkpoints ---------------------------------------------------------------------------
@@ -152,7 +158,11 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
 
     def _add(self, stream: str, t_ns: int, payload: np.ndarray) -> None:
         self.last_data_wall = time.monotonic()
-        for epoch in self.assembler.add(stream, t_ns, payload):
+        for epoch in self.assembler.add(stream, t_ns, payload, self.last_data_wall):
+            self._process(epoch)
+
+    def _release_silent(self) -> None:
+        for epoch in self.assembler.expire(time.monotonic()):
             self._process(epoch)
 
     def _process(self, epoch: Any) -> None:

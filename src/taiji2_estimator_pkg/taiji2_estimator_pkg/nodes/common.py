@@ -47,9 +47,9 @@ def declare_common(node: Any) -> dict[str, Any]:
             "shutdown; empty disables")).value,
         "checkpoint_period_s": dp("checkpoint_period_s", 60.0, descriptor(
             "seconds of data between checkpoints [s]", low=1.0, high=86400.0)).value,
-        "max_epoch_lag_s": dp("max_epoch_lag_s", 5.0, descriptor(
-            "an epoch missing a stream is processed anyway once this far behind the newest stamp [s]",
-            low=0.1, high=600.0)).value,
+        "max_stream_silence_s": dp("max_stream_silence_s", 2.0, descriptor(
+            "a raw stream silent this long (wall clock) no longer holds epochs back: they are processed "
+            "without it (dropout) [s]", low=0.1, high=600.0)).value,
         "starved_after_s": dp("starved_after_s", 5.0, descriptor(
             "WARN 'starved' when no raw data arrived for this long (wall clock) [s]", low=0.5, high=3600.0)).value,
     }

@@ -50,7 +50,7 @@ class ScaleFactorEstimatorNode(rclpy.node.Node):
         self.p = common.declare_common(self)
         self.instrument = common.instrument_from(self.p)
         self.estimator = make_scale_factor_estimator(self.instrument, self.p["method"], self.p["gate_probability"])
-        self.assembler = EpochAssembler(STREAMS, int(self.p["max_epoch_lag_s"] * 1e9))
+        self.assembler = EpochAssembler(STREAMS, self.p["max_stream_silence_s"])
         self.node_rejections = common.RejectionCounts()
         self.last_nis = float("nan")
         self.last_publish_ns = -1
@@ -69,8 +69,9 @@ class ScaleFactorEstimatorNode(rclpy.node.Node):
                               for g in GRS_IDS}
         self.rate_pub = self.create_publisher(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, qos)
         self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
-        self.create_timer(1.0, self._publish_diagnostics,
-                          clock=rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME))
+        steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
+        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
+        self.create_timer(0.5, self._release_silent, clock=steady)
         self.get_logger().info(f"method {self.p['method']}, nominal model "
                                f"{self.p['config_file'] or self.p['layout']}, publishing every "
                                f"{self.p['publish_period_s']} s of data")
@@ -117,7 +118,11 @@ class ScaleFactorEstimatorNode(rclpy.node.Node):
 
     def _add(self, stream: str, t_ns: int, payload: np.ndarray) -> None:
         self.last_data_wall = time.monotonic()
-        for epoch in self.assembler.add(stream, t_ns, payload):
+        for epoch in self.assembler.add(stream, t_ns, payload, self.last_data_wall):
+            self._process(epoch)
+
+    def _release_silent(self) -> None:
+        for epoch in self.assembler.expire(time.monotonic()):
             self._process(epoch)
 
     def _process(self, epoch: Any) -> None:
