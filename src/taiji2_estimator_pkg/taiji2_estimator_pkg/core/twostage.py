@@ -1,0 +1,704 @@
+"""Two-stage (separate-bias) Kalman filter: a bias-free filter plus an innovations GLS.
+
+Model (linear Gaussian state space with constant unknown parameters theta)::
+
+    x_k = F x_{k-1} + B (u0_k + U_k theta) + w_k,      w_k ~ N(0, Q)
+    y_k = H x_k + X_k theta + v_k,                      v_k ~ N(0, R)
+
+with the initial state of each segment diffuse. Friedland's decomposition: the filter run with
+theta = 0 (the *bias-free* filter) has gains that do not depend on the data; its innovations
+e0_k and the sensitivities S_k of the innovations to theta (the same filter run on the
+regressors) give the exact innovations of the filter for any theta, ``e_k(theta) = e0_k - S_k
+theta``, with covariance ``Lambda_k``. Hence
+
+    theta^ = (sum S_k^T Lambda_k^-1 S_k)^-1 sum S_k^T Lambda_k^-1 e0_k,
+    Cov(theta^) = (sum S_k^T Lambda_k^-1 S_k)^-1,
+
+identical to the Kalman filter on the state augmented with theta under a diffuse prior, and equal
+to the Fisher information when evaluated on noise-free regressors. The segment's initial state is
+part of theta (``n`` extra parameters), so the bias-free filter can start at its steady-state
+covariance: a diffuse parameter plus any Gaussian is still diffuse, and the filter is then
+linear time-invariant from the first sample.
+
+Two evaluation paths give the same numbers (to rounding):
+
+- :meth:`TwoStageFilter.step`: one sample, O(1), general (missing or partial measurements,
+  a different process noise for one step, chi-square gating); after irregular steps the covariance
+  is recomputed by the Riccati recursion until it is back at the steady state within
+  ``snap_tolerance`` (then it is set to it exactly);
+- :meth:`TwoStageFilter.run_regular`: a run of regular samples at the steady state in bulk: the
+  closed loop ``A = F (I - K H)`` is diagonalised block by block (the model supplies coordinates
+  in which it is block diagonal) and each mode is a first-order recursion evaluated by
+  :func:`scipy.signal.lfilter`.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.linalg import solve_discrete_are
+from scipy.signal import lfilter
+
+__all__ = [
+    "RegularRunOutput",
+    "StateSpaceModel",
+    "StepInfo",
+    "TwoStageFilter",
+    "solve_information",
+    "steady_state_prior_covariance",
+]
+
+_CHUNK = 4096  # samples per block of the bulk path (memory, not numerics)
+
+
+@dataclass(frozen=True)
+class StateSpaceModel:
+    """Nominal (regular-sample) model of a :class:`TwoStageFilter`.
+
+    Attributes
+    ----------
+    f : numpy.ndarray
+        (n, n) transition F.
+    b : numpy.ndarray
+        (n, n_u) input matrix B.
+    q : numpy.ndarray
+        (n, n) process noise covariance per step (already mapped into the state).
+    h : numpy.ndarray
+        (m, n) observation matrix H.
+    r : numpy.ndarray
+        (m, m) measurement noise covariance R.
+    blocks : tuple of tuple of int
+        State index groups in which ``F (I - K H)`` is block diagonal (None: one block).
+    """
+
+    f: np.ndarray
+    b: np.ndarray
+    q: np.ndarray
+    h: np.ndarray
+    r: np.ndarray
+    blocks: tuple[tuple[int, ...], ...] | None = None
+
+    @property
+    def n(self) -> int:
+        """State dimension."""
+        return self.f.shape[0]
+
+    @property
+    def m(self) -> int:
+        """Measurement dimension."""
+        return self.h.shape[0]
+
+
+@dataclass(frozen=True)
+class StepInfo:
+    """Diagnostics of one :meth:`TwoStageFilter.step`.
+
+    Attributes
+    ----------
+    nis : float
+        Pre-fit normalised innovation squared (with the parameter uncertainty), NaN if no
+        measurement or the parameters are not yet determined.
+    dof : int
+        Measurement dimension used.
+    accepted : bool
+        False if gated out.
+    post_nis : float
+        ``r^T Lambda^-1 r`` of the innovation ``r = e0 - S theta`` for a given theta (evaluation).
+    state : numpy.ndarray or None
+        Posterior state for the given theta (evaluation).
+    """
+
+    nis: float
+    dof: int
+    accepted: bool
+    post_nis: float = float("nan")
+    state: np.ndarray | None = None
+
+
+@dataclass
+class RegularRunOutput:
+    """Optional per-sample outputs of :meth:`TwoStageFilter.run_regular`.
+
+    Attributes
+    ----------
+    nis : numpy.ndarray or None
+        (L,) post-fit NIS ``r^T Lambda^-1 r``, ``r = e0 - S theta`` (theta given).
+    states : numpy.ndarray or None
+        (L, n) posterior state estimates for the given theta.
+    innovations : numpy.ndarray or None
+        (L, m) post-fit innovations r.
+    """
+
+    nis: np.ndarray | None = None
+    states: np.ndarray | None = None
+    innovations: np.ndarray | None = None
+
+
+def steady_state_prior_covariance(f: np.ndarray, h: np.ndarray, q: np.ndarray, r: np.ndarray,
+                                  max_iterations: int = 200) -> np.ndarray:
+    """Steady-state prior covariance of the Kalman filter by the structured doubling algorithm.
+
+    Solves ``P = F P F^T - F P H^T (H P H^T + R)^-1 H P F^T + Q``, written as
+    ``P = A^T P (I + G P)^-1 A + Q`` with ``A = F^T``, ``G = H^T R^-1 H``, by the doubling
+    iteration (Chu, Fan, Lin 2005)::
+
+        A_{k+1} = A_k (I + G_k H_k)^-1 A_k
+        G_{k+1} = G_k + A_k (I + G_k H_k)^-1 G_k A_k^T
+        H_{k+1} = H_k + A_k^T H_k (I + G_k H_k)^-1 A_k        (H_0 = Q, H_k -> P)
+
+    Quadratic convergence, accurate for the tiny process-to-measurement noise ratios met here
+    (down to 1e-8), and it keeps any block structure of the problem exactly.
+    """
+    n = f.shape[0]
+    a_k = f.T.copy()
+    g_k = h.T @ np.linalg.solve(r, h)
+    g_k = 0.5 * (g_k + g_k.T)
+    h_k = np.asarray(q, dtype=np.float64).copy()
+    eye = np.eye(n)
+    for _ in range(max_iterations):
+        w = np.linalg.inv(eye + g_k @ h_k)
+        a_w = a_k @ w
+        h_next = h_k + a_k.T @ h_k @ w @ a_k
+        g_next = g_k + a_w @ g_k @ a_k.T
+        a_k = a_w @ a_k
+        h_next = 0.5 * (h_next + h_next.T)
+        g_k = 0.5 * (g_next + g_next.T)
+        change = np.max(np.abs(h_next - h_k))
+        h_k = h_next
+        if change <= 1e-15 * np.max(np.abs(h_k)) and np.max(np.abs(a_k)) < 1e-8:
+            return h_k
+    return solve_discrete_are(f.T, h.T, q, r)
+
+
+def solve_information(info: np.ndarray, vector: np.ndarray, rcond: float = 1e-13, positive: bool = False
+                      ) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Solve ``info theta = vector`` for a symmetric PSD information matrix, robustly.
+
+    Jacobi scaling, then an eigen-decomposition; directions with eigenvalue below ``rcond`` times
+    the largest are treated as undetermined (pseudo-inverse).
+
+    With ``positive`` (the caller knows the matrix is well conditioned) a plain inverse of the
+    scaled matrix is used (faster; falls back to the eigen-decomposition if it fails).
+
+    Returns
+    -------
+    theta : numpy.ndarray
+        Solution (minimum norm in the undetermined directions).
+    covariance : numpy.ndarray
+        Pseudo-inverse of ``info``.
+    full_rank : bool
+        Whether every direction is determined.
+    """
+    diag = np.diag(info).copy()
+    scale = np.where(diag > 0.0, 1.0 / np.sqrt(np.where(diag > 0.0, diag, 1.0)), 0.0)
+    scaled = info * scale[:, None] * scale[None, :]
+    scaled = 0.5 * (scaled + scaled.T)
+    if positive and np.all(diag > 0.0):
+        try:
+            np.linalg.cholesky(scaled)
+            covariance = np.linalg.inv(scaled) * scale[:, None] * scale[None, :]
+            return covariance @ vector, covariance, True
+        except np.linalg.LinAlgError:
+            pass
+    values, vectors = np.linalg.eigh(scaled)
+    top = float(values[-1]) if values.size else 0.0
+    keep = values > rcond * max(top, 0.0)
+    inverse_values = np.where(keep, 1.0 / np.where(keep, values, 1.0), 0.0)
+    pinv = (vectors * inverse_values) @ vectors.T
+    covariance = pinv * scale[:, None] * scale[None, :]
+    theta = covariance @ vector
+    return theta, covariance, bool(np.all(keep) and np.all(diag > 0.0))
+
+
+class TwoStageFilter:
+    """Bias-free filter with parameter sensitivities and an information-form GLS.
+
+    Parameters
+    ----------
+    model : StateSpaceModel
+        Nominal model.
+    n_params : int
+        Number p of constant parameters of interest (the columns of U and X); the n initial-state
+        parameters of the current segment follow them in theta.
+    snap_tolerance : float
+        Relative distance to the steady-state covariance below which the covariance is set to it.
+    """
+
+    def __init__(self, model: StateSpaceModel, n_params: int, snap_tolerance: float = 1e-10) -> None:
+        self.model = model
+        self.p = int(n_params)
+        self.snap_tolerance = float(snap_tolerance)
+        n, m = model.n, model.m
+        self.q_total = self.p + n
+        self._steady_state()
+        # filter state: posterior of the last step, or the prior of the next one when fresh
+        self.x = np.zeros(n)
+        self.sens = np.zeros((n, self.q_total))
+        self.cov = self.p_prior_ss.copy()
+        self.fresh = True
+        self.steady = True
+        self.sens[:, self.p:] = np.eye(n)
+        self.info = np.zeros((self.q_total, self.q_total))
+        self.vector = np.zeros(self.q_total)
+        self.chi2 = 0.0  # sum of e0^T Lambda^-1 e0 (post-fit chi-square = chi2 - vector^T theta)
+        self.n_updates = 0
+        self.n_rejected = 0
+        self.dof_total = 0
+        self.n_segments = 1
+        self.segment_x0: list[tuple[np.ndarray, np.ndarray]] = []
+        self.evaluation = False
+        self._m = m
+
+    # steady state ---------------------------------------------------------------------------
+    def _steady_state(self) -> None:
+        mdl = self.model
+        f, h, q, r = mdl.f, mdl.h, mdl.q, mdl.r
+        p_prior = steady_state_prior_covariance(f, h, q, r)
+        p_prior = 0.5 * (p_prior + p_prior.T)
+        blocks = mdl.blocks or (tuple(range(mdl.n)),)
+        mask = np.zeros((mdl.n, mdl.n), dtype=bool)
+        for block in blocks:
+            mask[np.ix_(block, block)] = True
+        # in the model's coordinates the steady state is block diagonal: remove the rounding of the
+        # Riccati solver off the blocks, so that gain and closed loop are exactly block structured
+        scale = np.sqrt(np.abs(np.diag(p_prior)))
+        off = np.abs(p_prior) / np.maximum(np.outer(scale, scale), np.finfo(float).tiny)
+        if np.any(~mask) and np.max(off[~mask]) > 1e-6:
+            raise ValueError(f"steady state not block diagonal in the given coordinates "
+                             f"(off-block correlation {np.max(off[~mask]):.3g})")
+        p_prior = np.where(mask, p_prior, 0.0)
+        lam = h @ p_prior @ h.T + r
+        lam = 0.5 * (lam + lam.T)
+        gain = np.linalg.solve(lam, h @ p_prior).T
+        i_kh = np.eye(mdl.n) - gain @ h
+        p_post = i_kh @ p_prior @ i_kh.T + gain @ r @ gain.T
+        closed = f @ i_kh
+        off = np.max(np.abs(closed[~mask])) if np.any(~mask) else 0.0
+        if off > 1e-12 * np.max(np.abs(closed)):
+            raise ValueError(f"closed loop not block diagonal in the given coordinates (off-block {off:.3g})")
+        closed = np.where(mask, closed, 0.0)
+        eigvals = np.zeros(mdl.n, dtype=complex)
+        eigvecs = np.zeros((mdl.n, mdl.n), dtype=complex)
+        for block in blocks:
+            idx = np.asarray(block)
+            values, vectors = np.linalg.eig(closed[np.ix_(idx, idx)])
+            eigvals[idx] = values
+            eigvecs[np.ix_(idx, idx)] = vectors
+        self.p_prior_ss = p_prior
+        self.p_post_ss = 0.5 * (p_post + p_post.T)
+        self.gain_ss = gain
+        self.lambda_ss = lam
+        self.lambda_inv_ss = np.linalg.inv(lam)
+        self.lambda_inv_ss = 0.5 * (self.lambda_inv_ss + self.lambda_inv_ss.T)
+        self.closed_loop = closed
+        # one lfilter per conjugate pair: the partner mode is the complex conjugate
+        filtered, partner = [], {}
+        for block in blocks:
+            idx = list(block)
+            if len(idx) == 2 and abs(eigvals[idx[0]].imag) > 0.0 and \
+                    np.isclose(eigvals[idx[0]], np.conj(eigvals[idx[1]]), rtol=1e-12, atol=0.0):
+                eigvecs[:, idx[1]] = np.conj(eigvecs[:, idx[0]])
+                eigvals[idx[1]] = np.conj(eigvals[idx[0]])
+                filtered.append(idx[0])
+                partner[idx[1]] = idx[0]
+            else:
+                filtered.extend(idx)
+        self._filtered_modes = filtered
+        self._conjugate_partner = partner
+        self._real_modes = bool(np.all(eigvals.imag == 0.0) and np.all(eigvecs.imag == 0.0))
+        self.modes = eigvals
+        self.mode_vectors = eigvecs
+        self.mode_vectors_inv = np.linalg.inv(eigvecs)
+        self._whiten = np.linalg.cholesky(self.lambda_inv_ss)  # Lambda^-1 = L L^T
+
+    def innovation_gramian(self) -> np.ndarray:
+        """``X = sum_l (A^T)^l H^T Lambda^-1 H A^l`` at the steady state (A = F (I - K H)).
+
+        ``(B u)^T X (B u)`` is the energy ``sum_l e_l^T Lambda^-1 e_l`` of the innovations that a unit
+        input u at one step leaves in all later innovations (computed by doubling).
+        """
+        closed = self.closed_loop
+        gram = self.model.h.T @ self.lambda_inv_ss @ self.model.h
+        power = closed.copy()
+        for _ in range(200):
+            increment = power.T @ gram @ power
+            gram = gram + increment
+            power = power @ power
+            if np.max(np.abs(increment)) <= 1e-17 * np.max(np.abs(gram)) and np.max(np.abs(power)) < 1e-9:
+                break
+        return 0.5 * (gram + gram.T)
+
+    # parameters -------------------------------------------------------------------------------
+    def solve(self) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Current GLS solution over all of theta (parameters of interest first, then x0)."""
+        return solve_information(self.info, self.vector)
+
+    def parameter_estimate(self) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Estimate and covariance of the p parameters of interest (x0 marginalised).
+
+        Returns
+        -------
+        theta : numpy.ndarray
+            (p,) estimate.
+        covariance : numpy.ndarray
+            (p, p) covariance.
+        determined : bool
+            Whether all p parameters (and x0) are determined by the data so far.
+        """
+        theta, cov, full = self.solve()
+        return theta[:self.p], cov[:self.p, :self.p], full
+
+    def post_fit_chi2(self) -> float:
+        """Sum of post-fit NIS at the current estimate (expected ``dof_total - q``)."""
+        theta, _, _ = self.solve()
+        return float(self.chi2 - self.vector @ theta)
+
+    def segment_theta(self, segment: int, theta_p: np.ndarray, theta_last: np.ndarray) -> np.ndarray:
+        """Full theta (parameters, x0) of segment ``segment`` (0-based) for parameters ``theta_p``.
+
+        Finished segments use their conditional x0 estimate; the current one uses ``theta_last``.
+        """
+        if segment < len(self.segment_x0):
+            offset, gain = self.segment_x0[segment]
+            return np.concatenate((theta_p, offset - gain @ theta_p))
+        return theta_last
+
+    def reset_segment(self) -> None:
+        """Start a new segment: the state becomes diffuse again (after a long gap).
+
+        The initial-state parameters of the finished segment are marginalised out of the
+        information (they no longer influence future innovations); their conditional estimate
+        given the parameters is kept in :attr:`segment_x0`.
+        """
+        p, n = self.p, self.model.n
+        info, vec = self.info, self.vector
+        if self.evaluation:
+            self.x = np.zeros(n)
+            self.cov = self.p_prior_ss.copy()
+            self.fresh = True
+            self.steady = True
+            self.n_segments += 1
+            return
+        if np.any(info[p:, p:] != 0.0):
+            _, c_pinv, _ = solve_information(info[p:, p:], np.zeros(n))
+            coupling = info[:p, p:]
+            # conditional estimate of the finished segment's x0 given the parameters:
+            # x0^ = C^+ (b_x - B^T theta_p)  (kept for evaluation passes)
+            self.segment_x0.append((c_pinv @ vec[p:], c_pinv @ coupling.T))
+            reduced = info[:p, :p] - coupling @ c_pinv @ coupling.T
+            vec_p = vec[:p] - coupling @ c_pinv @ vec[p:]
+            self.chi2 -= float(vec[p:] @ c_pinv @ vec[p:])
+            info = np.zeros_like(info)
+            info[:p, :p] = 0.5 * (reduced + reduced.T)
+            vec = np.zeros_like(vec)
+            vec[:p] = vec_p
+            self.info, self.vector = info, vec
+        else:
+            self.segment_x0.append((np.zeros(n), np.zeros((n, p))))
+        self.x = np.zeros(n)
+        self.sens = np.zeros((n, self.q_total))
+        self.sens[:, p:] = np.eye(n)
+        self.cov = self.p_prior_ss.copy()
+        self.fresh = True
+        self.steady = True
+        self.n_segments += 1
+
+    # per-sample path -----------------------------------------------------------------------------
+    def step(self, y: ArrayLike | None = None, x_reg: ArrayLike | None = None, u0: ArrayLike | None = None,
+             u_reg: ArrayLike | None = None, rows: ArrayLike | None = None, q: ArrayLike | None = None,
+             gate: float | None = None, estimate: tuple[np.ndarray, np.ndarray] | None = None,
+             r: ArrayLike | None = None) -> StepInfo:
+        """Process one sample: predict (unless first of a segment), then update.
+
+        Parameters
+        ----------
+        y : array_like, optional
+            (m,) measurement (None: missing, predict only).
+        x_reg : array_like, optional
+            (m, p) measurement regressor X_k (None: zero).
+        u0 : array_like, optional
+            (n_u,) known input (None: zero).
+        u_reg : array_like, optional
+            (n_u, p) input regressor U_k (None: zero).
+        rows : array_like of bool, optional
+            (m,) measurement rows present (None: all).
+        q : array_like, optional
+            (n, n) process noise of this step if not the nominal one.
+        gate : float, optional
+            NIS threshold (None: no gating; gating needs ``estimate``).
+        estimate : (theta, covariance), optional
+            Current estimate of all q_total parameters and its covariance, for the pre-fit NIS
+            ``e^T (Lambda + S Cov S^T)^-1 e``, ``e = e0 - S theta`` (None: no NIS).
+        r : array_like, optional
+            (m, m) measurement noise of this step if not the nominal one (rows are selected from it).
+
+        Returns
+        -------
+        StepInfo
+            In evaluation mode (:meth:`evaluation_copy`) ``post_nis`` and ``state`` are filled.
+        """
+        mdl = self.model
+        p = self.p
+        regular = q is None and rows is None and r is None and y is not None
+        if not self.fresh:
+            # x^_k = F x_{k-1} + B (u0_k + U_k theta): the theta part is carried by the sensitivities M
+            self.x = mdl.f @ self.x
+            if u0 is not None:
+                self.x = self.x + mdl.b @ np.asarray(u0, dtype=np.float64)
+            if not self.evaluation:
+                self.sens = mdl.f @ self.sens
+                if u_reg is not None:
+                    self.sens[:, :p] += mdl.b @ np.asarray(u_reg, dtype=np.float64)
+            if not (self.steady and regular):
+                # P^_k = F P_{k-1} F^T + Q
+                self.cov = mdl.f @ self.cov @ mdl.f.T + (mdl.q if q is None else np.asarray(q, dtype=np.float64))
+        else:
+            # first sample of a segment: its state is the parameter x0, any input is ignored
+            self.fresh = False
+        if y is None:
+            self.steady = False
+            return StepInfo(float("nan"), 0, True, float("nan"), self.x.copy() if self.evaluation else None)
+        y = np.asarray(y, dtype=np.float64)
+        r_full = mdl.r if r is None else np.asarray(r, dtype=np.float64)
+        if rows is None:
+            h, r, yy = mdl.h, r_full, y
+            xr = None if x_reg is None else np.asarray(x_reg, dtype=np.float64)
+        else:
+            sel = np.asarray(rows, dtype=bool)
+            h, r, yy = mdl.h[sel], r_full[np.ix_(sel, sel)], y[sel]
+            xr = None if x_reg is None else np.asarray(x_reg, dtype=np.float64)[sel]
+        use_ss = self.steady and regular
+        # innovation e0 = y - H x^ and, unless evaluating, its sensitivity S = H M + X
+        e0 = yy - h @ self.x
+        if use_ss:
+            lam_inv, lam = self.lambda_inv_ss, self.lambda_ss
+        else:
+            lam = h @ self.cov @ h.T + r
+            lam = 0.5 * (lam + lam.T)
+            lam_inv = np.linalg.inv(lam)
+        if self.evaluation:
+            s = None
+            post_nis = float(e0 @ lam_inv @ e0)
+        else:
+            s = h @ self.sens
+            if xr is not None:
+                s[:, :p] += xr
+            post_nis = float("nan")
+        nis_value = float("nan")
+        if estimate is not None and s is not None:
+            theta, cov_theta = estimate
+            resid = e0 - s @ theta
+            total = lam + s @ cov_theta @ s.T
+            nis_value = float(resid @ np.linalg.solve(total, resid))
+        if gate is not None and np.isfinite(nis_value) and nis_value > gate:
+            self.n_rejected += 1
+            self.steady = False
+            return StepInfo(nis_value, yy.size, False)
+        if s is not None:
+            # information of the innovations: sum S^T Lambda^-1 S, sum S^T Lambda^-1 e0
+            s_w = s.T @ lam_inv
+            self.info += s_w @ s
+            self.vector += s_w @ e0
+            self.chi2 += float(e0 @ lam_inv @ e0)
+            self.n_updates += 1
+            self.dof_total += yy.size
+        if use_ss:
+            gain = self.gain_ss
+            self.cov = self.p_post_ss
+        else:
+            # K = P^ H^T Lambda^-1
+            gain = self.cov @ h.T @ lam_inv
+            # P = (I - K H) P^ (I - K H)^T + K R K^T   (Joseph form)
+            i_kh = np.eye(mdl.n) - gain @ h
+            self.cov = i_kh @ self.cov @ i_kh.T + gain @ r @ gain.T
+            self.cov = 0.5 * (self.cov + self.cov.T)
+        # x = x^ + K e0 ; M = M^ - K S
+        self.x = self.x + gain @ e0
+        if s is not None:
+            self.sens = self.sens - gain @ s
+        if not use_ss:
+            self.steady = False
+            if regular:
+                scale = np.max(np.abs(self.p_post_ss))
+                if np.max(np.abs(self.cov - self.p_post_ss)) <= self.snap_tolerance * scale:
+                    self.cov = self.p_post_ss.copy()
+                    self.steady = True
+        return StepInfo(nis_value, yy.size, True, post_nis, self.x.copy() if self.evaluation else None)
+
+    # bulk path -------------------------------------------------------------------------------------
+    def run_regular(self, y: ArrayLike, x_reg: ArrayLike | None = None, u0: ArrayLike | None = None,
+                    u_reg: ArrayLike | None = None, want_states: bool = False,
+                    want_innovations: bool = False) -> RegularRunOutput:
+        """Process L regular samples at the steady state in bulk (same result as L :meth:`step`).
+
+        Parameters
+        ----------
+        y : array_like
+            (L, m) measurements (all present).
+        x_reg : array_like, optional
+            (L, m, p) measurement regressors.
+        u0 : array_like, optional
+            (L, n_u) known inputs of each step (the input of a segment's first sample is ignored).
+        u_reg : array_like, optional
+            (L, n_u, p) input regressors of each step.
+        want_states, want_innovations : bool
+            Evaluation mode only (see :meth:`evaluation_copy`): return the posterior states and
+            the innovations; the NIS ``e^T Lambda^-1 e`` is always returned in evaluation mode.
+
+        Returns
+        -------
+        RegularRunOutput
+        """
+        if not self.steady:
+            raise RuntimeError("run_regular needs the filter at its steady state")
+        mdl = self.model
+        n, m, p, qt = mdl.n, mdl.m, self.p, self.q_total
+        y = np.asarray(y, dtype=np.float64).reshape(-1, m)
+        length = y.shape[0]
+        out = RegularRunOutput()
+        if length == 0:
+            return out
+        evaluation = self.evaluation
+        cols = 1 if evaluation else 1 + qt
+        nis_parts, state_parts, innov_parts = [], [], []
+        gain, fk = self.gain_ss, mdl.f @ self.gain_ss
+        i_kh = np.eye(n) - gain @ mdl.h
+        v, v_inv = self.mode_vectors, self.mode_vectors_inv
+        modes = self.modes
+        dtype: type = complex
+        if self._real_modes:
+            v, v_inv, modes, dtype = v.real, v_inv.real, modes.real, float
+        whiten_t = self._whiten.T
+        xr_all = None if (x_reg is None or evaluation) else np.asarray(x_reg, dtype=np.float64)
+        u0_all = None if u0 is None else np.asarray(u0, dtype=np.float64)
+        ur_all = None if (u_reg is None or evaluation) else np.asarray(u_reg, dtype=np.float64)
+        start = 0
+        while start < length:
+            stop = min(start + _CHUNK, length)
+            count = stop - start
+            yc = y[start:stop]
+            xc = None if xr_all is None else xr_all[start:stop]
+            # state-major drive (n, count, cols) of z_k = A z_{k-1} + D_k
+            drive = np.zeros((n, count, cols))
+            if u0_all is not None:
+                drive[:, :, 0] = mdl.b @ u0_all[start:stop].T
+            if ur_all is not None:
+                drive[:, :, 1:1 + p] = np.tensordot(mdl.b, ur_all[start:stop], axes=([1], [1]))
+            # feedback of the previous sample: F K (y_{k-1} - X_{k-1} theta)
+            drive[:, 1:, 0] += fk @ yc[:-1].T
+            if xc is not None:
+                drive[:, 1:, 1:1 + p] -= np.tensordot(fk, xc[:-1], axes=([1], [1]))
+            first = np.empty((n, cols))
+            if self.fresh:
+                first[:, 0] = self.x
+                if not evaluation:
+                    first[:, 1:] = self.sens
+                self.fresh = False
+            else:
+                first[:, 0] = mdl.f @ self.x + drive[:, 0, 0]
+                if not evaluation:
+                    first[:, 1:] = mdl.f @ self.sens + drive[:, 0, 1:]
+            # modal coordinates: w_k = lambda w_{k-1} + V^-1 D_k (one filter per conjugate pair)
+            w_first = v_inv @ first
+            modal_drive = (v_inv @ drive[:, 1:, :].reshape(n, -1)).reshape(n, count - 1, cols)
+            modal = np.empty((n, count, cols), dtype=dtype)
+            modal[:, 0, :] = w_first
+            if count > 1:
+                for i in self._filtered_modes:
+                    lam_i = modes[i]
+                    modal[i, 1:, :], _ = lfilter([1.0], [1.0, -lam_i], modal_drive[i], axis=0,
+                                                 zi=(lam_i * w_first[i])[None, :])
+                for i, j in self._conjugate_partner.items():
+                    modal[i, 1:, :] = np.conj(modal[j, 1:, :])
+            priors = (v @ modal.reshape(n, -1)).reshape(n, count, cols)
+            if dtype is complex:
+                priors = priors.real
+            # innovations e0 = y - H x^ and sensitivities S = H M + X
+            e0 = yc.T - mdl.h @ priors[:, :, 0]  # (m, count)
+            if evaluation:
+                innovations = e0.T
+                ew = whiten_t @ e0
+                nis_parts.append(np.sum(ew * ew, axis=0))
+                if want_innovations:
+                    innov_parts.append(innovations)
+                if want_states:
+                    state_parts.append((priors[:, :, 0] + gain @ e0).T)
+            else:
+                s = (mdl.h @ priors[:, :, 1:].reshape(n, -1)).reshape(m, count, qt)
+                if xc is not None:
+                    s[:, :, :p] += np.moveaxis(xc, 0, 1)
+                ew = (whiten_t @ e0).reshape(-1)
+                sw = (whiten_t @ s.reshape(m, -1)).reshape(m * count, qt)
+                self.info += sw.T @ sw
+                self.vector += sw.T @ ew
+                self.chi2 += float(ew @ ew)
+                self.n_updates += count
+                self.dof_total += count * m
+            # posterior of the last step of the chunk
+            self.x = i_kh @ priors[:, -1, 0] + gain @ yc[-1]
+            if not evaluation:
+                self.sens = i_kh @ priors[:, -1, 1:]
+                if xc is not None:
+                    self.sens[:, :p] -= gain @ xc[-1]
+            start = stop
+        self.cov = self.p_post_ss.copy()
+        if evaluation:
+            out.nis = np.concatenate(nis_parts)
+            if want_states:
+                out.states = np.concatenate(state_parts)
+            if want_innovations:
+                out.innovations = np.concatenate(innov_parts)
+        return out
+
+    def evaluation_copy(self, theta: ArrayLike) -> TwoStageFilter:
+        """A copy that only propagates the state for fixed parameters ``theta`` (q_total,).
+
+        In it the sensitivities are folded into the state (``x <- x + M theta``): the caller feeds
+        the known inputs ``u0 + U theta_p`` and measurements ``y - X theta_p``; each update then
+        yields the innovation of the full filter at ``theta`` and its NIS, at the cost of a single
+        column. No information is accumulated. After :meth:`reset_segment` set :attr:`x` to the
+        new segment's initial state.
+        """
+        clone = copy.copy(self)
+        clone.x = self.x + self.sens @ np.asarray(theta, dtype=np.float64)
+        clone.sens = np.zeros_like(self.sens)
+        clone.cov = self.cov.copy()
+        clone.info = self.info.copy()
+        clone.vector = self.vector.copy()
+        clone.segment_x0 = list(self.segment_x0)
+        clone.evaluation = True
+        return clone
+
+    # checkpoint -------------------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        """Checkpoint (plain lists and numbers)."""
+        return {
+            "x": self.x.tolist(), "sens": self.sens.tolist(), "cov": self.cov.tolist(),
+            "fresh": self.fresh, "steady": self.steady, "info": self.info.tolist(),
+            "vector": self.vector.tolist(), "chi2": self.chi2, "n_updates": self.n_updates,
+            "n_rejected": self.n_rejected, "dof_total": self.dof_total, "n_segments": self.n_segments,
+            "segment_x0": [[a.tolist(), b.tolist()] for a, b in self.segment_x0],
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore a checkpoint of :meth:`state_dict` (same model and p)."""
+        self.x = np.asarray(state["x"], dtype=np.float64)
+        self.sens = np.asarray(state["sens"], dtype=np.float64)
+        self.cov = np.asarray(state["cov"], dtype=np.float64)
+        self.fresh = bool(state["fresh"])
+        self.steady = bool(state["steady"])
+        if self.steady:
+            self.cov = (self.p_prior_ss if self.fresh else self.p_post_ss).copy()
+        self.info = np.asarray(state["info"], dtype=np.float64)
+        self.vector = np.asarray(state["vector"], dtype=np.float64)
+        self.chi2 = float(state["chi2"])
+        self.n_updates = int(state["n_updates"])
+        self.n_rejected = int(state["n_rejected"])
+        self.dof_total = int(state["dof_total"])
+        self.n_segments = int(state["n_segments"])
+        self.segment_x0 = [(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+                           for a, b in state.get("segment_x0", [])]
