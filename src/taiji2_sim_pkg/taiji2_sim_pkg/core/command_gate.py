@@ -78,6 +78,10 @@ class CommandSchedule:
         """Has a command stamped >= t arrived (so the command in effect at t is known)?"""
         return self.latest_stamp_ns >= t_ns
 
+    def covered_steps(self, t_ns: int, dt_ns: int) -> int:
+        """How many consecutive steps from t on have their command known (0 if t is not covered)."""
+        return 0 if self.latest_stamp_ns < t_ns else (self.latest_stamp_ns - t_ns) // dt_ns + 1
+
     def command_at(self, t_ns: int) -> np.ndarray:
         """The command in effect at t (the last one if none is stamped <= t yet)."""
         index = 0

@@ -39,6 +39,8 @@ GRS_TOPICS = ("/taiji2/grs1/voltages", "/taiji2/grs2/voltages")
 TMRF_FRAMES = ("tmrf1", "tmrf2")
 CLOCK_MODES = ("realtime", "accelerated", "follow")
 _NS = 1_000_000_000
+#: Largest number of steps simulated in one call in accelerated mode (bounds latency of /clock).
+_MAX_CHUNK_STEPS = 100
 
 
 def _descriptor(description: str, **ranges: tuple[float, float]) -> Any:
@@ -137,6 +139,9 @@ class SpacecraftSim(rclpy.node.Node):
         else:
             # wall-clock (steady) timer: in accelerated mode this node is the source of simulated time
             self.create_timer(0.0 if not self._sync else 0.05, self._on_accelerated_tick, clock=_steady_clock())
+            # one-shot: armed by each command, runs after the queued callbacks
+            self._step_timer = self.create_timer(0.0, self._on_step_timer, clock=_steady_clock())
+            self._step_timer.cancel()
         self.create_timer(1.0, self._publish_diagnostics, clock=_steady_clock())
         self.get_logger().info(
             f"layout {config.layout}, seed {self._sim.seed}, {self._n_steps} steps of {config.dt_s} s, "
@@ -156,8 +161,8 @@ class SpacecraftSim(rclpy.node.Node):
         if not self._schedule.offer(stamp_ns, self._gate.torque_n_m):
             self.get_logger().warn(f"command stamped {stamp_ns / _NS:.3f} s arrived out of order; ignored",
                                    throttle_duration_sec=5.0)
-        if self._mode == "accelerated" and self._sync:
-            self._step_while_commanded()
+        if self._mode == "accelerated" and self._sync and self._step_timer.is_canceled():
+            self._step_timer.reset()  # step once the commands already queued are taken, in one chunk
 
     # -- stepping ------------------------------------------------------------------------------
     def _time_ns(self) -> int:
@@ -223,10 +228,27 @@ class SpacecraftSim(rclpy.node.Node):
             if not self._done:
                 self._publish_clock()
 
+    def _on_step_timer(self) -> None:
+        self._step_timer.cancel()
+        self._step_while_commanded()
+
     def _step_while_commanded(self) -> None:
-        while self._started and not self._done and self._schedule.covers(self._time_ns()):
-            self._step_once()
-            if not self._done:
+        # every step whose command is already known is simulated in one vectorised call (identical
+        # to stepping one by one); /clock then jumps to the end of the chunk
+        while self._started and not self._done:
+            steps = min(self._schedule.covered_steps(self._time_ns(), self._dt_ns), _MAX_CHUNK_STEPS,
+                        self._n_steps - self._sim.step_index)
+            if steps <= 0:
+                return
+            t0_ns = self._time_ns()
+            torques = np.array([self._schedule.command_at(t0_ns + j * self._dt_ns) for j in range(steps)])
+            out = self._sim.advance(torques)
+            self._check_range(out.t_s, out.truth.grs_linear_maneuver, out.truth.grs_linear_meas)
+            for j in range(steps):
+                self._publish_sample(out[j], t0_ns + (j + 1) * self._dt_ns, check_range=False)
+            if self._sim.step_index >= self._n_steps:
+                self._finish()
+            else:
                 self._publish_clock()
 
     def _finish(self) -> None:
@@ -244,7 +266,11 @@ class SpacecraftSim(rclpy.node.Node):
             self.context.try_shutdown("simulation finished")
 
     # -- output --------------------------------------------------------------------------------
-    def _publish_sample(self, sample: SimSample, t_ns: int) -> None:
+    def _check_range(self, t_s: Any, maneuver: Any, total: Any) -> None:
+        for event in self._range.update_block(t_s, maneuver, total):
+            self.get_logger().warn(event.message())
+
+    def _publish_sample(self, sample: SimSample, t_ns: int, check_range: bool = True) -> None:
         m = messages.taiji2_msgs
         star = m.StarTracker()
         _stamp(star.header, t_ns)
@@ -262,8 +288,8 @@ class SpacecraftSim(rclpy.node.Node):
             grs.vx1, grs.vx2, grs.vy1, grs.vy2, grs.vz1, grs.vz2 = (float(v) for v in volts)
             pub.publish(grs)
         truth = sample.truth
-        for event in self._range.update(sample.t_s, truth.grs_linear_maneuver, truth.grs_linear_meas):
-            self.get_logger().warn(event.message())
+        if check_range:
+            self._check_range([sample.t_s], truth.grs_linear_maneuver[None], truth.grs_linear_meas[None])
         if self._truth is not None:
             self._truth.publish(sample, t_ns, self._sim.step_index)
 
