@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 from rosbags.rosbag2 import Reader
+
 from taiji2_runtime.bag.bulk_decode import encode_messages
 from taiji2_runtime.bag.provenance import simulator_provenance
 from taiji2_runtime.bag.writer import BagWriter

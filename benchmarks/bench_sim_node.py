@@ -21,9 +21,9 @@ import time
 os.environ.setdefault("TAIJI2_RUNTIME", "cyclonedds")
 os.environ.setdefault("ROS_DOMAIN_ID", str(120 + os.getpid() % 50))
 
-from taiji2_runtime.ros import messages, rclpy  # noqa: E402
-from taiji2_sim_pkg.core.config import load_config  # noqa: E402
-from taiji2_sim_pkg.core.simulator import Simulator, maneuver_torque_commands  # noqa: E402
+from taiji2_runtime.ros import messages, rclpy
+from taiji2_sim_pkg.core.config import load_config
+from taiji2_sim_pkg.core.simulator import Simulator, maneuver_torque_commands
 
 TOPICS = {
     "/taiji2/star_tracker": ("taiji2_msgs", "StarTracker"),

@@ -6,9 +6,10 @@ Used by the bag and calibration tests; nothing of this project is involved in wr
 from __future__ import annotations
 
 import numpy as np
-from conftest import REPO
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from conftest import REPO
 
 ST, GRS, CMD = "taiji2_msgs/msg/StarTracker", "taiji2_msgs/msg/GrsVoltages", "geometry_msgs/msg/WrenchStamped"
 TOPICS = {"/taiji2/star_tracker": ST, "/taiji2/grs1/voltages": GRS, "/taiji2/grs2/voltages": GRS,

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+
 from taiji2_runtime.bag.bulk_decode import decode_messages, encode_messages, flatten_type
 from taiji2_runtime.bag.bulk_read import RawPiece, read_raw_messages
 from taiji2_runtime.bag.reading import open_reader

@@ -15,11 +15,13 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import PYTHON, REPO, python_subprocess_env
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader
+
 from taiji2_runtime.interfaces import typestore
+
+from conftest import PYTHON, REPO, python_subprocess_env
 
 try:
     from taiji2_estimator_pkg.io import load_raw_bag
@@ -207,8 +209,9 @@ def _canonical(decoded):
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_ground_segment_bag_is_played_by_the_cli(tmp_path, storage, context, executor):
-    from taiji2_runtime.ros import messages, rclpy
     from test_raw_bag import write_ground_segment_bag
+
+    from taiji2_runtime.ros import messages, rclpy
 
     data = write_ground_segment_bag(tmp_path / "bag", storage)
     node = rclpy.node.Node("bagtest_ground_sink", context=context)

@@ -8,12 +8,14 @@ import subprocess
 
 import numpy as np
 import pytest
-from conftest import PYTHON, REPO, python_subprocess_env
-from contract_bags import CMD, GRS, ST, TOPICS, write_ground_segment_bag
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
 from taiji2_estimator_pkg.io import RawBagError, load_raw_bag
 from taiji2_runtime.bag.bulk_decode import encode_messages
+
+from conftest import PYTHON, REPO, python_subprocess_env
+from contract_bags import CMD, GRS, ST, TOPICS, write_ground_segment_bag
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
 from taiji2_runtime.bag.bulk_decode import encode_messages
 from taiji2_runtime.bag.player import Player, PlayOptions
 from taiji2_runtime.bag.recorder import Recorder, RecordOptions

@@ -10,6 +10,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader
+
 from taiji2_runtime.bag.bulk_decode import encode_messages
 from taiji2_runtime.bag.errors import BagError
 from taiji2_runtime.bag.reading import custom_data

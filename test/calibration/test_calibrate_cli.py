@@ -7,12 +7,14 @@ import subprocess
 
 import numpy as np
 import pytest
-from conftest import PYTHON, python_subprocess_env
-from contract_bags import simulated_data, write_ground_segment_bag
+
 from taiji2_estimator_pkg.calibration import align_streams, calibrate
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
+
+from conftest import PYTHON, python_subprocess_env
+from contract_bags import simulated_data, write_ground_segment_bag
 
 DURATION_S = 2400.0
 

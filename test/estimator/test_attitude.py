@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import noise_free, simulate
+
 from taiji2_estimator_pkg.core.attitude import (
     AttitudeIntegrator,
     SmoothingDerivative,
@@ -11,6 +11,8 @@ from taiji2_estimator_pkg.core.attitude import (
     quat_multiply,
 )
 from taiji2_estimator_pkg.core.validation import InputValidator, ValidationOptions, validate_batch
+
+from conftest import noise_free, simulate
 
 
 def _random_walk_quaternions(n: int = 2000, seed: int = 1) -> np.ndarray:

@@ -4,11 +4,13 @@ import json
 
 import numpy as np
 import pytest
-from conftest import simulate, truth
+
 from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimator, PaperComOffsetFilter
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.pipeline import calibrate
 from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorFilter, ScaleFactorEstimator
+
+from conftest import simulate, truth
 
 
 def _run_per_sample(co, out, omega, scale_factors, rows=slice(None)):

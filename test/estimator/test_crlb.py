@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from taiji2_estimator_pkg.core.crlb import crlb, crlb_for_layout, noise_free_signals, whittle_scale_factor_information
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 

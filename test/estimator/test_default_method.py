@@ -15,12 +15,14 @@ sampling distributions (deterministic for the fixed seeds; a real inconsistency 
 
 import numpy as np
 import pytest
-from conftest import simulate, truth
 from scipy.stats import chi2
 from scipy.stats import t as student_t
+
 from taiji2_estimator_pkg.core.crlb import crlb_for_layout
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.pipeline import calibrate
+
+from conftest import simulate, truth
 
 DIFF = np.hstack((np.eye(3), -np.eye(3)))
 SEEDS = 10

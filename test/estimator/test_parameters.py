@@ -3,6 +3,7 @@
 import re
 
 import pytest
+
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.parameters import (
     DEFAULTS,

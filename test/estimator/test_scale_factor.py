@@ -4,9 +4,11 @@ import json
 
 import numpy as np
 import pytest
-from conftest import simulate, truth
+
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorFilter, ScaleFactorEstimator
+
+from conftest import simulate, truth
 
 
 def _per_sample(est, out, rows=slice(None), columns=(0, 1)):

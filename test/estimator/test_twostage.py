@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 from scipy.linalg import solve_discrete_are
+
 from taiji2_estimator_pkg.core.twostage import (
     StateSpaceModel,
     TwoStageFilter,

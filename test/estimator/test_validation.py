@@ -1,10 +1,12 @@
 """Bad inputs: rejected with a reason and counted, per sample and in bulk; the estimate continues."""
 
 import numpy as np
-from conftest import simulate
+
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.scale_factor import ScaleFactorEstimator
 from taiji2_estimator_pkg.core.validation import InputValidator, validate_batch
+
+from conftest import simulate
 
 
 def _corrupt(out):

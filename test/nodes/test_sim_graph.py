@@ -6,12 +6,14 @@ import time
 
 import numpy as np
 import pytest
-from conftest import spin_until
+
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 from taiji2_sim_pkg.nodes.maneuver_commander import ManeuverCommander
 from taiji2_sim_pkg.nodes.spacecraft_sim import SpacecraftSim
+
+from conftest import spin_until
 
 RAW = {"/taiji2/star_tracker": "StarTracker", "/taiji2/grs1/voltages": "GrsVoltages",
        "/taiji2/grs2/voltages": "GrsVoltages"}

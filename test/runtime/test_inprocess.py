@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import pytest
-from conftest import spin_until
+
 from taiji2_runtime.ros import messages, rclpy
+
+from conftest import spin_until
 
 Node = rclpy.node.Node
 QoS = rclpy.qos

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
 from taiji2_runtime.interfaces import message_class
 
 MSG_DIR = Path(__file__).resolve().parents[2] / "src" / "taiji2_msgs" / "msg"

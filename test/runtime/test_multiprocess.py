@@ -11,13 +11,14 @@ from dataclasses import dataclass, field
 
 import cyclonedds.idl.types as t
 import pytest
-from conftest import PYTHON, python_subprocess_env
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.idl import IdlStruct
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
+
+from conftest import PYTHON, python_subprocess_env
 
 
 # Hand-written from the ROS 2 conventions only (rosidl IDL of geometry_msgs/WrenchStamped):

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 import yaml
+
 from taiji2_sim_pkg.core.config import (
     NOISE_SOURCE_NAMES,
     ConfigError,

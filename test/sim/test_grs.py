@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from taiji2_sim_pkg.core.config import NOISE_SOURCE_NAMES, load_config
 from taiji2_sim_pkg.core.frames import crf_to_tmrf
 from taiji2_sim_pkg.core.grs import (

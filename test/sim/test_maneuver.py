@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from taiji2_sim_pkg.core.config import ConfigError, load_config
 from taiji2_sim_pkg.core.maneuver import ManeuverError, SquareWaveManeuver, thrust_per_thruster_n
 

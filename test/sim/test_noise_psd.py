@@ -17,6 +17,7 @@ import pytest
 from scipy.integrate import quad
 from scipy.signal import welch
 from scipy.stats import chi2
+
 from taiji2_sim_pkg.core.config import NOISE_SOURCE_NAMES, load_config
 from taiji2_sim_pkg.core.grs import voltages_from_accelerations
 from taiji2_sim_pkg.core.noise import NoiseStreams

@@ -4,6 +4,7 @@ from dataclasses import fields
 
 import numpy as np
 import pytest
+
 from taiji2_sim_pkg.core.config import NOISE_SOURCE_NAMES, load_config
 from taiji2_sim_pkg.core.effects import Effect
 from taiji2_sim_pkg.core.noise import NoiseStreams

@@ -19,9 +19,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from taiji2_runtime.ros import messages, rclpy
-
 from taiji2_estimator_pkg.report import EstimateTable, format_table
+from taiji2_runtime.ros import messages, rclpy
 
 _NS = 1_000_000_000
 
@@ -96,7 +95,7 @@ def main(args: argparse.Namespace) -> int:
     # each GRS <- both estimators; plus the recorder on every topic
     extra = 1 if args.record else 0
     subscribers = [1 + (args.method == "paper") + extra, 2 + extra, 2 + extra]
-    est_args = ["--ros-args", *source, "-p", f"method:={args.method}"]
+    est_args = ["--ros-args", "-p", f"layout:={args.config or args.layout}", "-p", f"method:={args.method}"]
     commands = {
         "scale_factor_estimator": ["run", "taiji2_estimator_pkg", "scale_factor_estimator", *est_args],
         "com_offset_estimator": ["run", "taiji2_estimator_pkg", "com_offset_estimator", *est_args],

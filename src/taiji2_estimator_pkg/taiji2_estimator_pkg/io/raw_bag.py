@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
 from taiji2_runtime.bag.bulk_decode import decode_messages
 from taiji2_runtime.bag.bulk_read import RawMessages, read_raw_messages
 from taiji2_runtime.bag.contract import (

@@ -17,18 +17,14 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from taiji2_runtime.entry import run_node
-from taiji2_runtime.ros import messages, rclpy
 
 from taiji2_estimator_pkg.checkpoint import load_checkpoint, save_checkpoint
-from taiji2_estimator_pkg.core.com_offset import (
-    ComOffsetEstimate,
-    ComOffsetEstimator,
-    ComOffsetOptions,
-    PaperComOffsetFilter,
-)
+from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimate, ComOffsetEstimator, PaperComOffsetFilter
+from taiji2_estimator_pkg.core.parameters import com_offset_options, paper_com_offset_options
 from taiji2_estimator_pkg.epochs import EpochAssembler
 from taiji2_estimator_pkg.nodes import common
+from taiji2_runtime.entry import run_node
+from taiji2_runtime.ros import messages, rclpy
 
 GRS_IDS = (1, 2)
 
@@ -38,22 +34,19 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("com_offset_estimator", **node_kwargs)
-        self.p = common.declare_common(self)
-        self.paper_period_s = self.declare_parameter("paper_batch_period_s", 600.0, common.descriptor(
-            "method paper: rerun the paper's filter over all data every this many seconds of data [s]",
-            low=1.0, high=86400.0)).value
-        self.use_rate = self.declare_parameter("use_rate_estimate", False, common.descriptor(
-            "use the scale-factor estimator's filtered body rate in the centripetal term omega x (omega x d); "
-            "off, the term is neglected (|omega|^2 |d| ~ 1e-14 m s^-2 at calibration rates, far below the "
-            "noise) and a replayed bag reproduces the live estimate exactly, independent of message timing")).value
+        self.p = common.declare_parameters(self, "com_offset_estimator")
+        self.paper_period_s = self.p["paper_batch_period_s"]
+        # the body rate enters only omega x (omega x d), ~1e-14 m s^-2 at calibration rates; without it
+        # a replayed bag reproduces the live estimate exactly, independent of message timing
+        self.use_rate = self.p["use_rate_estimate"]
         self.instrument = common.instrument_from(self.p)
-        gate = self.p["gate_probability"] if self.p["gate_probability"] > 0 else None
         self.paper = self.p["method"] == "paper"
         streams = ("star_tracker", "grs1", "grs2") if self.paper else ("grs1", "grs2")
-        self.estimator = (PaperComOffsetFilter(self.instrument, GRS_IDS) if self.paper
-                          else ComOffsetEstimator(self.instrument, GRS_IDS, ComOffsetOptions(gate_probability=gate)))
+        self.estimator = (PaperComOffsetFilter(self.instrument, GRS_IDS, paper_com_offset_options(self.p))
+                          if self.paper else ComOffsetEstimator(self.instrument, GRS_IDS, com_offset_options(self.p)))
         self.assembler = EpochAssembler(streams, self.p["max_stream_silence_s"])
         self.node_rejections = common.RejectionCounts()
+        self.reported_rejections: dict[str, dict[str, int]] = {}
         self.scale_factor_msgs: dict[int, Any] = {}
         self.scale_factors: tuple[np.ndarray, np.ndarray] | None = None
         self.scale_factors_ns = -1
@@ -85,7 +78,7 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
         self.create_timer(1.0, self._publish_diagnostics, clock=steady)
         self.create_timer(0.5, self._release_silent, clock=steady)
-        self.get_logger().info(f"method {self.p['method']}, nominal model {self.p['config_file'] or self.p['layout']}")
+        self.get_logger().info(f"method {self.p['method']}, nominal model {self.p['layout']}")
 
     # -- checkpoints ---------------------------------------------------------------------------
     def _resume(self) -> None:
@@ -252,9 +245,10 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         counts = self.node_rejections.merged(estimate.rejected if estimate else {})
         used = int(estimate.n_samples) if estimate else 0
         starved = time.monotonic() - self.last_data_wall > self.p["starved_after_s"]
-        level, text = common.consistency_level(estimate.nis_mean if estimate else float("nan"),
-                                               bool(estimate and estimate.determined), starved,
-                                               common.total(counts), used)
+        fresh = common.new_rejections(counts, self.reported_rejections)
+        self.reported_rejections = counts
+        level, text = common.health(estimate.nis_mean if estimate else float("nan"),
+                                    bool(estimate and estimate.determined), starved, fresh)
         if self.scale_factors is None and not starved:
             level, text = "OK", "waiting for the scale-factor estimates"
         status = common.diagnostic("com_offset_estimator", level, text, {

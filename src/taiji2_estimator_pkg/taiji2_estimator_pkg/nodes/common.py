@@ -9,9 +9,10 @@ import json
 from typing import Any
 
 import numpy as np
-from taiji2_runtime.ros import messages, rclpy
 
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
+from taiji2_estimator_pkg.core.parameters import DEFAULTS
+from taiji2_runtime.ros import messages, rclpy
 
 STAR_TRACKER_TOPIC = "/taiji2/star_tracker"
 GRS_TOPICS = {1: "/taiji2/grs1/voltages", 2: "/taiji2/grs2/voltages"}
@@ -30,37 +31,37 @@ def descriptor(description: str, *, low: float | None = None, high: float | None
     return d
 
 
-def declare_common(node: Any) -> dict[str, Any]:
-    """Declare the parameters every estimator node has; returns their values."""
-    dp = node.declare_parameter
-    values = {
-        "layout": dp("layout", "type1", descriptor(
-            "nominal model: built-in layout (type1, type2) used when config_file is empty")).value,
-        "config_file": dp("config_file", "", descriptor("nominal model: layout YAML (simulator config format)")).value,
-        "method": dp("method", "gls", descriptor("estimation method: gls (default, honest covariance) | paper")).value,
-        "gate_probability": dp("gate_probability", 1e-6, descriptor(
-            "false-alarm probability of the chi-square outlier gate per update; 0 disables", low=0.0, high=0.5)).value,
-        "publish_period_s": dp("publish_period_s", 1.0, descriptor(
-            "publish the running estimate every this many seconds of data [s]", low=0.1, high=3600.0)).value,
-        "checkpoint_file": dp("checkpoint_file", "", descriptor(
-            "estimator state file: loaded at start if present (resume), written every checkpoint_period_s and at "
-            "shutdown; empty disables")).value,
-        "checkpoint_period_s": dp("checkpoint_period_s", 60.0, descriptor(
-            "seconds of data between checkpoints [s]", low=1.0, high=86400.0)).value,
-        "max_stream_silence_s": dp("max_stream_silence_s", 2.0, descriptor(
-            "a raw stream silent this long (wall clock) no longer holds epochs back: they are processed "
-            "without it (dropout) [s]", low=0.1, high=600.0)).value,
-        "starved_after_s": dp("starved_after_s", 5.0, descriptor(
-            "WARN 'starved' when no raw data arrived for this long (wall clock) [s]", low=0.5, high=3600.0)).value,
-    }
+#: Parameters of the node glue (not of the estimation core), documented in config/estimators.yaml.
+NODE_PARAMETERS: dict[str, dict[str, Any]] = {
+    "scale_factor_estimator": {"publish_period_s": 1.0, "max_stream_silence_s": 2.0, "starved_after_s": 5.0},
+    "com_offset_estimator": {"publish_period_s": 1.0, "max_stream_silence_s": 2.0, "starved_after_s": 5.0,
+                             "use_rate_estimate": False, "paper_batch_period_s": 600.0},
+}
+#: Core keys the nodes fix: both GRS are always estimated jointly (the two topics of the contract).
+_FIXED = {"grs_ids": [1, 2]}
+
+
+def declare_parameters(node: Any, node_name: str) -> dict[str, Any]:
+    """Declare every parameter of ``node_name`` (core defaults + node glue); returns dotted-key values.
+
+    The keys, meanings, units and defaults are documented in ``config/estimators.yaml``; the core's
+    ``parameters.DEFAULTS`` table and :data:`NODE_PARAMETERS` are their single source in code.
+    """
+    table = {**DEFAULTS[node_name], **NODE_PARAMETERS[node_name]}
+    values: dict[str, Any] = dict(_FIXED)
+    for key, default in table.items():
+        if key in _FIXED:
+            continue
+        values[key] = node.declare_parameter(key, default, descriptor(
+            f"see config/estimators.yaml, {node_name}.{key} (default {default!r})")).value
     if values["method"] not in METHODS:
         raise ValueError(f"method: {values['method']!r} is not one of {', '.join(METHODS)}")
     return values
 
 
 def instrument_from(values: dict[str, Any]) -> InstrumentModel:
-    """The nominal instrument model named by the ``layout``/``config_file`` parameters."""
-    return InstrumentModel.from_layout(values["config_file"] or values["layout"])
+    """The nominal instrument model named by the ``layout`` parameter (built-in name or YAML path)."""
+    return InstrumentModel.from_layout(values["layout"])
 
 
 def stamp_ns(header: Any) -> int:
@@ -127,14 +128,26 @@ def diagnostic(name: str, level_name: str, message: str, values: dict[str, Any])
     return status
 
 
-def consistency_level(nis_mean: float, determined: bool, starved: bool, rejected: int, used: int) -> tuple[str, str]:
-    """(level, message) of an estimator's health: WARN when inconsistent, starved or rejecting much."""
+def new_rejections(now: dict[str, dict[str, int]], before: dict[str, dict[str, int]]) -> dict[str, int]:
+    """``{"stream reason": n}`` of the rejections counted since ``before``."""
+    fresh = {}
+    for stream, reasons in now.items():
+        for reason, n in reasons.items():
+            delta = int(n) - int(before.get(stream, {}).get(reason, 0))
+            if delta > 0:
+                fresh[f"{stream} {reason}"] = delta
+    return fresh
+
+
+def health(nis_mean: float, determined: bool, starved: bool, fresh_rejections: dict[str, int]) -> tuple[str, str]:
+    """(level, message) of an estimator: WARN when starved, rejecting input, or inconsistent."""
     if starved:
         return "WARN", "starved: no raw data recently"
+    if fresh_rejections:
+        listed = ", ".join(f"{what} x{n}" for what, n in sorted(fresh_rejections.items()))
+        return "WARN", f"rejected input: {listed}"
     if not determined:
         return "OK", "collecting data (estimate not yet determined)"
     if np.isfinite(nis_mean) and not 0.5 < nis_mean < 2.0:
         return "WARN", f"inconsistent: mean NIS per dof {nis_mean:.2f} (about 1 expected)"
-    if used and rejected > 0.01 * used:
-        return "WARN", f"{rejected} inputs rejected ({100 * rejected / used:.1f} %)"
     return "OK", "consistent"

@@ -16,30 +16,24 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from taiji2_runtime.entry import run_node
-from taiji2_runtime.ros import messages, rclpy
 
 from taiji2_estimator_pkg.checkpoint import load_checkpoint, save_checkpoint
-from taiji2_estimator_pkg.core.scale_factor import (
-    PaperScaleFactorFilter,
-    PaperScaleFactorOptions,
-    ScaleFactorEstimate,
-    ScaleFactorEstimator,
-    ScaleFactorOptions,
-)
+from taiji2_estimator_pkg.core.parameters import paper_scale_factor_options, scale_factor_options
+from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorFilter, ScaleFactorEstimate, ScaleFactorEstimator
 from taiji2_estimator_pkg.epochs import EpochAssembler
 from taiji2_estimator_pkg.nodes import common
+from taiji2_runtime.entry import run_node
+from taiji2_runtime.ros import messages, rclpy
 
 GRS_IDS = (1, 2)
 STREAMS = ("star_tracker", "grs1", "grs2")
 
 
-def make_scale_factor_estimator(instrument: Any, method: str, gate_probability: float) -> Any:
-    """The core estimator for ``method`` (both GRS jointly)."""
-    gate = gate_probability if gate_probability > 0 else None
-    if method == "paper":
-        return PaperScaleFactorFilter(instrument, GRS_IDS, PaperScaleFactorOptions(gate_probability=gate))
-    return ScaleFactorEstimator(instrument, GRS_IDS, ScaleFactorOptions(gate_probability=gate))
+def make_scale_factor_estimator(instrument: Any, params: dict[str, Any]) -> Any:
+    """The core estimator for ``params["method"]`` (both GRS jointly)."""
+    if params["method"] == "paper":
+        return PaperScaleFactorFilter(instrument, GRS_IDS, paper_scale_factor_options(params))
+    return ScaleFactorEstimator(instrument, GRS_IDS, scale_factor_options(params))
 
 
 class ScaleFactorEstimatorNode(rclpy.node.Node):
@@ -47,11 +41,12 @@ class ScaleFactorEstimatorNode(rclpy.node.Node):
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("scale_factor_estimator", **node_kwargs)
-        self.p = common.declare_common(self)
+        self.p = common.declare_parameters(self, "scale_factor_estimator")
         self.instrument = common.instrument_from(self.p)
-        self.estimator = make_scale_factor_estimator(self.instrument, self.p["method"], self.p["gate_probability"])
+        self.estimator = make_scale_factor_estimator(self.instrument, self.p)
         self.assembler = EpochAssembler(STREAMS, self.p["max_stream_silence_s"])
         self.node_rejections = common.RejectionCounts()
+        self.reported_rejections: dict[str, dict[str, int]] = {}
         self.last_nis = float("nan")
         self.last_publish_ns = -1
         self.last_checkpoint_ns = -1
@@ -72,8 +67,7 @@ class ScaleFactorEstimatorNode(rclpy.node.Node):
         steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
         self.create_timer(1.0, self._publish_diagnostics, clock=steady)
         self.create_timer(0.5, self._release_silent, clock=steady)
-        self.get_logger().info(f"method {self.p['method']}, nominal model "
-                               f"{self.p['config_file'] or self.p['layout']}, publishing every "
+        self.get_logger().info(f"method {self.p['method']}, nominal model {self.p['layout']}, publishing every "
                                f"{self.p['publish_period_s']} s of data")
 
     # -- checkpoints ---------------------------------------------------------------------------
@@ -181,9 +175,10 @@ class ScaleFactorEstimatorNode(rclpy.node.Node):
             f"{s}:{r}": n for s, reasons in self.assembler.refused.items() for r, n in reasons.items()}})
         used = int(estimate.n_samples) if estimate else 0
         starved = time.monotonic() - self.last_data_wall > self.p["starved_after_s"]
-        level, text = common.consistency_level(estimate.nis_mean if estimate else float("nan"),
-                                               bool(estimate and estimate.determined), starved,
-                                               common.total(counts), used)
+        fresh = common.new_rejections(counts, self.reported_rejections)
+        self.reported_rejections = counts
+        level, text = common.health(estimate.nis_mean if estimate else float("nan"),
+                                    bool(estimate and estimate.determined), starved, fresh)
         status = common.diagnostic("scale_factor_estimator", level, text, {
             "method": self.p["method"], "samples_used": used, "rejected": counts,
             "nis_mean": None if estimate is None else estimate.nis_mean,

@@ -13,9 +13,9 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages, rclpy
-
 from taiji2_sim_pkg.core.config import builtin_layouts, load_config
 from taiji2_sim_pkg.core.maneuver import SquareWaveManeuver
 

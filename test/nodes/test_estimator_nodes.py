@@ -1,0 +1,162 @@
+"""Estimator nodes: parameters file, bad input (rejected, counted, WARN, estimate continues), restart resume."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from taiji2_estimator_pkg.core.instrument import InstrumentModel
+from taiji2_estimator_pkg.core.parameters import flatten
+from taiji2_estimator_pkg.core.scale_factor import ScaleFactorEstimator
+from taiji2_estimator_pkg.nodes.scale_factor_estimator import ScaleFactorEstimatorNode
+from taiji2_runtime.ros import messages, rclpy
+from taiji2_sim_pkg.core.config import load_config
+from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
+
+from conftest import REPO, spin_until
+
+PARAMS_FILE = REPO / "src" / "taiji2_estimator_pkg" / "config" / "estimators.yaml"
+N = 3000  # 300 s at 10 Hz
+
+
+@pytest.fixture(scope="module")
+def experiment():
+    config = load_config("type1", overrides={"maneuver.duration_s": N / 10})
+    return simulate_batch(config, 21, maneuver_torque_commands(config, N))
+
+
+class _Feeder:
+    """Publishes raw contract messages and collects estimates and diagnostics."""
+
+    def __init__(self, context):
+        self.node = rclpy.node.Node("feeder", context=context)
+        t = messages.taiji2_msgs
+        qos = rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL)
+        self.star = self.node.create_publisher(t.StarTracker, "/taiji2/star_tracker", qos)
+        self.grs = {g: self.node.create_publisher(t.GrsVoltages, f"/taiji2/grs{g}/voltages", qos) for g in (1, 2)}
+        self.estimates: list = []
+        self.node.create_subscription(t.ScaleFactorEstimate, "/taiji2/estimates/grs1/scale_factors",
+                                      self.estimates.append, qos)
+        self.diagnostics: list = []
+        self.node.create_subscription(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics",
+                                      lambda m: self.diagnostics.extend(m.status), 100)
+
+    def star_tracker(self, t_s, q):
+        m = messages.taiji2_msgs.StarTracker()
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(round(t_s * 1e9), 10**9)
+        m.header.frame_id = "crf"
+        m.attitude.x, m.attitude.y, m.attitude.z, m.attitude.w = (float(v) for v in q)
+        self.star.publish(m)
+
+    def voltages(self, t_s, grs_id, v, *, topic_id=None, frame=None):
+        m = messages.taiji2_msgs.GrsVoltages(grs_id=grs_id)
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(round(t_s * 1e9), 10**9)
+        m.header.frame_id = frame or f"tmrf{grs_id}"
+        m.vx1, m.vx2, m.vy1, m.vy2, m.vz1, m.vz2 = (float(x) for x in v)
+        self.grs[topic_id or grs_id].publish(m)
+
+
+def test_params_file_and_node_declarations_are_one_source(context):
+    node = ScaleFactorEstimatorNode(context=context, cli_args=["--params-file", str(PARAMS_FILE)])
+    documented = flatten(yaml.safe_load(PARAMS_FILE.read_text())["scale_factor_estimator"]["ros__parameters"])
+    documented.pop("grs_ids")  # offline API only (documented so)
+    for key, value in documented.items():
+        assert node.has_parameter(key), key
+        assert node.get_parameter(key).value == value, key
+
+
+def _feed(feeder, executor, out, indices, corrupt=None):
+    for k in indices:
+        q, v = out.st_quat_xyzw[k], out.voltages_v[k]
+        if corrupt is None or not corrupt(feeder, k, out.t_s[k], q, v):
+            feeder.star_tracker(out.t_s[k], q)
+            feeder.voltages(out.t_s[k], 1, v[0])
+            feeder.voltages(out.t_s[k], 2, v[1])
+        if k % 100 == 0:
+            executor.spin_once(timeout_sec=0.0)
+
+
+def test_bad_inputs_are_rejected_counted_and_reported_while_the_estimate_goes_on(context, executor, experiment):
+    out = experiment
+    node = ScaleFactorEstimatorNode(context=context)
+    feeder = _Feeder(context)
+    executor.add_node(node)
+    executor.add_node(feeder.node)
+    assert spin_until(executor, lambda: feeder.star.get_subscription_count() == 1)
+
+    def corrupt(f, k, t, q, v):
+        if k == 500:   # NaN voltage
+            f.star_tracker(t, q)
+            f.voltages(t, 1, np.full(6, np.nan))
+            f.voltages(t, 2, v[1])
+            return True
+        if k == 600:   # a GRS2 message on the GRS1 topic, and a wrong frame
+            f.star_tracker(t, q)
+            f.voltages(t, 2, v[1], topic_id=1)
+            f.voltages(t, 2, v[1], frame="base_link")
+            return True
+        if 700 <= k < 750:  # star-tracker dropout
+            f.voltages(t, 1, v[0])
+            f.voltages(t, 2, v[1])
+            return True
+        if k == 800:   # non-unit quaternion
+            f.star_tracker(t, 1.5 * q)
+            f.voltages(t, 1, v[0])
+            f.voltages(t, 2, v[1])
+            return True
+        if k == 900:   # duplicate stamp
+            for _ in range(2):
+                f.star_tracker(t, q)
+                f.voltages(t, 1, v[0])
+                f.voltages(t, 2, v[1])
+            return True
+        return False
+
+    _feed(feeder, executor, out, range(N), corrupt)
+    last_ns = round(out.t_s[-1] * 1e9)
+    assert spin_until(executor, lambda: node.last_publish_ns >= last_ns, timeout_s=60)
+    warn_level = messages.diagnostic_msgs.DiagnosticStatus.WARN
+    assert spin_until(executor, lambda: any(s.name == "scale_factor_estimator" and s.level == warn_level
+                                            for s in feeder.diagnostics), timeout_s=5)
+    warn = next(s for s in feeder.diagnostics if s.name == "scale_factor_estimator"
+                and s.level == messages.diagnostic_msgs.DiagnosticStatus.WARN)
+    rejected = json.loads({kv.key: kv.value for kv in warn.values}["rejected"])
+    flat = json.dumps(rejected)
+    for reason in ("grs_id_mismatch", "frame_id_mismatch", "duplicate_stamp"):
+        assert reason in flat, (reason, rejected)
+    assert "grs1" in rejected and "star_tracker" in rejected  # NaN voltage, non-unit quaternion
+    estimate = node.estimator.estimate()
+    assert estimate.determined and np.all(np.isfinite(estimate.values))
+    assert estimate.n_samples >= N - 60  # everything else was used
+
+
+def test_a_restarted_node_resumes_from_its_checkpoint(context, executor, experiment, tmp_path):
+    out = experiment
+    checkpoint = Path(tmp_path) / "sf.json"
+    args = ["-p", f"checkpoint_file:={checkpoint}", "-p", "checkpoint_period_s:=10.0"]
+    feeder = _Feeder(context)
+    executor.add_node(feeder.node)
+    first = ScaleFactorEstimatorNode(context=context, cli_args=args)
+    executor.add_node(first)
+    assert spin_until(executor, lambda: feeder.star.get_subscription_count() == 1)
+    half = N // 2
+    _feed(feeder, executor, out, range(half))
+    half_ns = round(out.t_s[half - 1] * 1e9)
+    assert spin_until(executor, lambda: first.assembler._released_ns >= half_ns, timeout_s=60)
+    first.destroy_node()  # the node goes down (checkpoint written at shutdown)
+    assert checkpoint.exists()
+    second = ScaleFactorEstimatorNode(context=context, cli_args=args)
+    executor.add_node(second)
+    assert spin_until(executor, lambda: feeder.star.get_subscription_count() == 1)
+    _feed(feeder, executor, out, range(half, N))
+    last_ns = round(out.t_s[-1] * 1e9)
+    assert spin_until(executor, lambda: second.last_publish_ns >= last_ns, timeout_s=60)
+    resumed = second.estimator.estimate()
+    reference = ScaleFactorEstimator(InstrumentModel.from_layout("type1"), (1, 2)).process_batch(
+        out.t_s, out.st_quat_xyzw, out.voltages_v)
+    assert resumed.n_samples == reference.n_samples  # nothing lost, nothing counted twice
+    np.testing.assert_allclose(resumed.values, reference.values, rtol=1e-9)
