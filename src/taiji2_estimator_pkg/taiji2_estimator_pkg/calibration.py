@@ -10,13 +10,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
-from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimator, PaperComOffsetFilter
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
-from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorFilter, ScaleFactorEstimator
+from taiji2_estimator_pkg.core.pipeline import calibrate as pipeline_calibrate
 from taiji2_estimator_pkg.report import EstimateTable, GrsResult
 
 GRS_IDS = (1, 2)
@@ -107,7 +105,7 @@ def _merge(*counts: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, int]
 
 
 def calibrate(record: AlignedRecord, instrument: InstrumentModel, method: str = "gls") -> EstimateTable:
-    """Scale factors and c.m. offsets of both GRS from an aligned record.
+    """Scale factors and c.m. offsets of both GRS from an aligned record (the core pipeline, in bulk).
 
     Parameters
     ----------
@@ -123,21 +121,10 @@ def calibrate(record: AlignedRecord, instrument: InstrumentModel, method: str = 
     EstimateTable
         With ``extra["rejected"]`` (stream -> reason -> count) and ``extra["samples"]``.
     """
-    if method == "paper":
-        sf_estimator: Any = PaperScaleFactorFilter(instrument, GRS_IDS)
-        g = sf_estimator.process_batch(record.t_s, record.quat_xyzw, record.voltages_v)
-        d = PaperComOffsetFilter(instrument, GRS_IDS).process_batch(
-            record.t_s, record.quat_xyzw, record.voltages_v, {gid: g.of(gid)[0] for gid in GRS_IDS})
-    elif method == "gls":
-        sf_estimator = ScaleFactorEstimator(instrument, GRS_IDS)
-        g = sf_estimator.process_batch(record.t_s, record.quat_xyzw, record.voltages_v, want_rates=True)
-        omega = None
-        if sf_estimator.rates is not None and len(sf_estimator.rate_times):
-            omega = np.stack([np.interp(record.t_s, sf_estimator.rate_times, sf_estimator.rates[:, k],
-                                        left=np.nan, right=np.nan) for k in range(3)], axis=1)
-        d = ComOffsetEstimator(instrument, GRS_IDS).process_batch(record.t_s, record.voltages_v, omega, g)
-    else:
+    if method not in ("gls", "paper"):
         raise ValueError(f"method: {method!r} is not one of gls, paper")
+    result = pipeline_calibrate(record.t_s, record.quat_xyzw, record.voltages_v, instrument, GRS_IDS, method)
+    g, d = result.scale_factors, result.com_offsets
     rejected = _merge(record.rejected, g.rejected, d.rejected)
     total_rejected = sum(sum(v.values()) for v in rejected.values())
     results = []
