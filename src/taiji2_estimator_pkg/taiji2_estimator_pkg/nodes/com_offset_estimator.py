@@ -12,41 +12,34 @@ Parameters: ``config/estimators.yaml``.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from taiji2_estimator_pkg.checkpoint import load_checkpoint, save_checkpoint
 from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimate, ComOffsetEstimator, PaperComOffsetFilter
 from taiji2_estimator_pkg.core.parameters import com_offset_options, paper_com_offset_options
-from taiji2_estimator_pkg.epochs import EpochAssembler
 from taiji2_estimator_pkg.nodes import common
 from taiji2_runtime.entry import run_node
-from taiji2_runtime.ros import messages, rclpy
+from taiji2_runtime.ros import messages
 
 GRS_IDS = (1, 2)
+STREAMS = ("grs1", "grs2")
+STREAMS_PAPER = ("star_tracker", "grs1", "grs2")  # the paper method builds A~ from the star tracker
 
 
-class ComOffsetEstimatorNode(rclpy.node.Node):
+class ComOffsetEstimatorNode(common.EstimatorNode):
     """Estimates d_1, d_2 in CRF from the GRS linear readouts and the calibrated scale factors."""
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("com_offset_estimator", **node_kwargs)
-        self.p = common.declare_parameters(self, "com_offset_estimator")
+        self.paper = self.p["method"] == "paper"
         self.paper_period_s = self.p["paper_batch_period_s"]
         # the body rate enters only omega x (omega x d), ~1e-14 m s^-2 at calibration rates; without it
         # a replayed bag reproduces the live estimate exactly, independent of message timing
         self.use_rate = self.p["use_rate_estimate"]
-        self.instrument = common.instrument_from(self.p)
-        self.paper = self.p["method"] == "paper"
-        streams = ("star_tracker", "grs1", "grs2") if self.paper else ("grs1", "grs2")
         self.estimator = (PaperComOffsetFilter(self.instrument, GRS_IDS, paper_com_offset_options(self.p))
                           if self.paper else ComOffsetEstimator(self.instrument, GRS_IDS, com_offset_options(self.p)))
-        self.assembler = EpochAssembler(streams, self.p["max_stream_silence_s"])
-        self.node_rejections = common.RejectionCounts()
-        self.reported_rejections: dict[str, dict[str, int]] = {}
         self.scale_factor_msgs: dict[int, Any] = {}
         self.scale_factors: tuple[np.ndarray, np.ndarray] | None = None
         self.scale_factors_ns = -1
@@ -55,11 +48,10 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         self.last_t_ns = -1
         self.last_publish_ns = -1
         self.last_stamp_ns = -1  # stamp of the last published estimate
-        self.last_checkpoint_ns = -1
         self.last_nis = float("nan")
-        self.last_data_wall = time.monotonic()
-        self.last_estimate: ComOffsetEstimate | None = None
-        self._resume()
+        resumed = self.resume()
+        if resumed is not None:
+            self.last_t_ns = resumed
 
         t = messages.taiji2_msgs
         qos = common.raw_qos()
@@ -74,43 +66,20 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         self.pubs = {g: self.create_publisher(t.ComOffsetEstimate, f"/taiji2/estimates/grs{g}/com_offset", qos)
                      for g in GRS_IDS}
         self.diff_pub = self.create_publisher(t.ComOffsetEstimate, "/taiji2/estimates/com_offset_difference", qos)
-        self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
-        steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
-        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
-        self.create_timer(0.5, self._release_silent, clock=steady)
         self.get_logger().info(f"method {self.p['method']}, nominal model {self.p['layout']}")
 
+    def streams(self) -> Sequence[str]:
+        return STREAMS_PAPER if self.p["method"] == "paper" else STREAMS
+
     # -- checkpoints ---------------------------------------------------------------------------
-    def _resume(self) -> None:
-        path = self.p["checkpoint_file"]
-        state = load_checkpoint(path) if path else None
-        if state is None:
-            return
-        if state.get("method") != self.p["method"]:
-            raise ValueError(f"checkpoint_file {path}: written by method {state.get('method')!r}, "
-                             f"not {self.p['method']!r}")
+    def _checkpoint_payload(self) -> dict[str, Any]:
+        return {"history": self.history} if self.paper else {"estimator": self.estimator.state_dict()}
+
+    def _restore_payload(self, state: dict[str, Any]) -> None:
         if self.paper:
             self.history = [(t, q, v) for t, q, v in state["history"]]
         else:
             self.estimator.load_state_dict(state["estimator"])
-        self.assembler.load_state_dict(state["assembler"])
-        self.node_rejections.counts = state["node_rejections"]
-        self.last_t_ns = int(state["t_ns"])
-        self.get_logger().info(f"resumed from checkpoint {path} at t = {state['t_ns'] / 1e9:.1f} s")
-
-    def save_checkpoint(self, t_ns: int) -> None:
-        path = self.p["checkpoint_file"]
-        if not path:
-            return
-        state: dict[str, Any] = {"method": self.p["method"], "t_ns": t_ns,
-                                 "assembler": self.assembler.state_dict(),
-                                 "node_rejections": self.node_rejections.counts}
-        if self.paper:
-            state["history"] = self.history
-        else:
-            state["estimator"] = self.estimator.state_dict()
-        save_checkpoint(path, state)
-        self.last_checkpoint_ns = t_ns
 
     # -- input ---------------------------------------------------------------------------------
     def _on_scale_factors(self, msg: Any) -> None:
@@ -138,7 +107,7 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         self.omega = np.array([msg.vector.x, msg.vector.y, msg.vector.z], dtype=np.float64)
 
     def _on_star_tracker(self, msg: Any) -> None:
-        self._add("star_tracker", common.stamp_ns(msg.header), common.star_tracker_quaternion(msg))
+        self.add_sample("star_tracker", common.stamp_ns(msg.header), common.star_tracker_quaternion(msg))
 
     def _on_grs(self, msg: Any, grs_id: int) -> None:
         problem = common.grs_message_problem(msg, grs_id)
@@ -147,16 +116,7 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
             self.get_logger().warn(f"rejected GrsVoltages on {common.GRS_TOPICS[grs_id]}: {problem}",
                                    throttle_duration_sec=10.0)
             return
-        self._add(f"grs{grs_id}", common.stamp_ns(msg.header), common.grs_voltages(msg))
-
-    def _add(self, stream: str, t_ns: int, payload: np.ndarray) -> None:
-        self.last_data_wall = time.monotonic()
-        for epoch in self.assembler.add(stream, t_ns, payload, self.last_data_wall):
-            self._process(epoch)
-
-    def _release_silent(self) -> None:
-        for epoch in self.assembler.expire(time.monotonic()):
-            self._process(epoch)
+        self.add_sample(f"grs{grs_id}", common.stamp_ns(msg.header), common.grs_voltages(msg))
 
     def _process(self, epoch: Any) -> None:
         voltages = {g: epoch.samples[f"grs{g}"] for g in GRS_IDS if f"grs{g}" in epoch.samples}
@@ -184,7 +144,7 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         period_ns = int(period_s * 1e9)
         if self.last_publish_ns < 0 or epoch.t_ns // period_ns > self.last_publish_ns // period_ns:
             self.publish_estimate(epoch.t_ns)
-        if self.last_checkpoint_ns < 0 or epoch.t_ns - self.last_checkpoint_ns >= self.p["checkpoint_period_s"] * 1e9:
+        if self.checkpoint_due(epoch.t_ns):
             self.save_checkpoint(epoch.t_ns)
 
     # -- output --------------------------------------------------------------------------------
@@ -219,7 +179,7 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         self.last_estimate = estimate
         stamp = min(t_ns, self.scale_factors_ns)
         self.last_stamp_ns = stamp
-        rejected = common.total(self.node_rejections.merged(estimate.rejected))
+        rejected = common.total(self.rejection_counts())
         t = messages.taiji2_msgs
         for gid in GRS_IDS:
             d, cov = estimate.of(gid)
@@ -240,23 +200,8 @@ class ComOffsetEstimatorNode(rclpy.node.Node):
         msg.nis_mean = float(estimate.nis_mean)
         return msg
 
-    def _publish_diagnostics(self) -> None:
-        estimate = self.last_estimate
-        counts = self.node_rejections.merged(estimate.rejected if estimate else {})
-        used = int(estimate.n_samples) if estimate else 0
-        starved = time.monotonic() - self.last_data_wall > self.p["starved_after_s"]
-        fresh = common.new_rejections(counts, self.reported_rejections)
-        self.reported_rejections = counts
-        level, text = common.health(estimate.nis_mean if estimate else float("nan"),
-                                    bool(estimate and estimate.determined), starved, fresh)
-        if self.scale_factors is None and not starved:
-            level, text = "OK", "waiting for the scale-factor estimates"
-        status = common.diagnostic("com_offset_estimator", level, text, {
-            "method": self.p["method"], "samples_used": used, "rejected": counts,
-            "nis_mean": None if estimate is None else estimate.nis_mean})
-        array = messages.diagnostic_msgs.DiagnosticArray(status=[status])
-        common.set_stamp(array.header, max(self.last_publish_ns, 0))
-        self.diag_pub.publish(array)
+    def publish_health(self, waiting_for: str | None = None) -> None:
+        super().publish_health(None if self.scale_factors is not None else "the scale-factor estimates")
 
     def destroy_node(self) -> None:
         try:

@@ -6,12 +6,16 @@ No estimation logic lives here: that is in :mod:`taiji2_estimator_pkg.core`.
 from __future__ import annotations
 
 import json
+import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from taiji2_estimator_pkg.checkpoint import load_checkpoint, save_checkpoint
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.parameters import DEFAULTS
+from taiji2_estimator_pkg.epochs import EpochAssembler
 from taiji2_runtime.ros import messages, rclpy
 
 STAR_TRACKER_TOPIC = "/taiji2/star_tracker"
@@ -151,3 +155,99 @@ def health(nis_mean: float, determined: bool, starved: bool, fresh_rejections: d
     if np.isfinite(nis_mean) and not 0.5 < nis_mean < 2.0:
         return "WARN", f"inconsistent: mean NIS per dof {nis_mean:.2f} (about 1 expected)"
     return "OK", "consistent"
+
+
+class EstimatorNode(rclpy.node.Node):
+    """What both estimator nodes share: parameters, epoch alignment, rejection counts, health
+    diagnostics and checkpoint files. Subclasses build ``self.estimator`` and implement
+    ``streams()``, ``_process(epoch)``, ``_checkpoint_payload()`` and ``_restore_payload(state)``."""
+
+    def __init__(self, node_name: str, **node_kwargs: Any) -> None:
+        super().__init__(node_name, **node_kwargs)
+        self.p = declare_parameters(self, node_name)
+        self.instrument = instrument_from(self.p)
+        self.assembler = EpochAssembler(self.streams(), self.p["max_stream_silence_s"])
+        self.node_rejections = RejectionCounts()
+        self.reported_rejections: dict[str, dict[str, int]] = {}
+        self.last_data_wall = time.monotonic()
+        self.last_checkpoint_ns = -1
+        self.last_estimate: Any = None
+        self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
+        steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
+        self.create_timer(1.0, self.publish_health, clock=steady)
+        self.create_timer(0.5, self._release_silent, clock=steady)
+
+    # -- input -----------------------------------------------------------------------------------
+    def add_sample(self, stream: str, t_ns: int, payload: Any) -> None:
+        self.last_data_wall = time.monotonic()
+        for epoch in self.assembler.add(stream, t_ns, payload, self.last_data_wall):
+            self._process(epoch)
+
+    def _release_silent(self) -> None:
+        for epoch in self.assembler.expire(time.monotonic()):
+            self._process(epoch)
+
+    def streams(self) -> Sequence[str]:
+        """The raw streams this estimator aligns (may depend on ``self.p``)."""
+        raise NotImplementedError
+
+    def _process(self, epoch: Any) -> None:
+        raise NotImplementedError
+
+    # -- checkpoints -----------------------------------------------------------------------------
+    def resume(self) -> int | None:
+        """Load ``checkpoint_file`` if it exists; returns its data time [ns] (None: fresh start)."""
+        path = self.p["checkpoint_file"]
+        state = load_checkpoint(path) if path else None
+        if state is None:
+            return None
+        if state.get("method") != self.p["method"]:
+            raise ValueError(f"checkpoint_file {path}: written by method {state.get('method')!r}, "
+                             f"not {self.p['method']!r}")
+        self._restore_payload(state)
+        self.assembler.load_state_dict(state["assembler"])
+        self.node_rejections.counts = state["node_rejections"]
+        self.get_logger().info(f"resumed from checkpoint {path} at t = {state['t_ns'] / 1e9:.1f} s")
+        return int(state["t_ns"])
+
+    def save_checkpoint(self, t_ns: int) -> None:
+        path = self.p["checkpoint_file"]
+        if path:
+            save_checkpoint(path, {"method": self.p["method"], "t_ns": t_ns, "assembler": self.assembler.state_dict(),
+                                   "node_rejections": self.node_rejections.counts, **self._checkpoint_payload()})
+            self.last_checkpoint_ns = t_ns
+
+    def checkpoint_due(self, t_ns: int) -> bool:
+        return self.last_checkpoint_ns < 0 or t_ns - self.last_checkpoint_ns >= self.p["checkpoint_period_s"] * 1e9
+
+    def _checkpoint_payload(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def _restore_payload(self, state: dict[str, Any]) -> None:
+        raise NotImplementedError
+
+    # -- health ----------------------------------------------------------------------------------
+    def rejection_counts(self) -> dict[str, dict[str, int]]:
+        """Every rejection so far: node-level checks, epoch alignment and the core's validation and gating."""
+        alignment = {f"{s}:{r}": n for s, reasons in self.assembler.refused.items() for r, n in reasons.items()}
+        core = self.last_estimate.rejected if self.last_estimate is not None else {}
+        return self.node_rejections.merged(core, {"epoch_alignment": alignment} if alignment else {})
+
+    def publish_health(self, waiting_for: str | None = None) -> None:
+        """``/diagnostics``: OK, or WARN when starved, rejecting input (named), or inconsistent."""
+        estimate = self.last_estimate
+        counts = self.rejection_counts()
+        starved = time.monotonic() - self.last_data_wall > self.p["starved_after_s"]
+        fresh = new_rejections(counts, self.reported_rejections)
+        self.reported_rejections = counts
+        level, text = health(estimate.nis_mean if estimate else float("nan"),
+                             bool(estimate and estimate.determined), starved, fresh)
+        if waiting_for and level == "OK":
+            text = f"waiting for {waiting_for}"
+        status = diagnostic(self.get_name(), level, text, {
+            "method": self.p["method"], "samples_used": int(estimate.n_samples) if estimate else 0,
+            "rejected": counts, "nis_mean": None if estimate is None else estimate.nis_mean,
+            "last_stamp_s": None if estimate is None else estimate.t_s})
+        array = messages.diagnostic_msgs.DiagnosticArray(status=[status])
+        set_stamp(array.header, round(estimate.t_s * 1e9) if estimate is not None and np.isfinite(estimate.t_s) else 0)
+        self.diag_pub.publish(array)

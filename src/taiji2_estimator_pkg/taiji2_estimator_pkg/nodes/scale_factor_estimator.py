@@ -11,19 +11,16 @@ Parameters: ``config/estimators.yaml``.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from taiji2_estimator_pkg.checkpoint import load_checkpoint, save_checkpoint
 from taiji2_estimator_pkg.core.parameters import paper_scale_factor_options, scale_factor_options
-from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorFilter, ScaleFactorEstimate, ScaleFactorEstimator
-from taiji2_estimator_pkg.epochs import EpochAssembler
+from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorFilter, ScaleFactorEstimator
 from taiji2_estimator_pkg.nodes import common
 from taiji2_runtime.entry import run_node
-from taiji2_runtime.ros import messages, rclpy
+from taiji2_runtime.ros import messages
 
 GRS_IDS = (1, 2)
 STREAMS = ("star_tracker", "grs1", "grs2")
@@ -36,23 +33,15 @@ def make_scale_factor_estimator(instrument: Any, params: dict[str, Any]) -> Any:
     return ScaleFactorEstimator(instrument, GRS_IDS, scale_factor_options(params))
 
 
-class ScaleFactorEstimatorNode(rclpy.node.Node):
+class ScaleFactorEstimatorNode(common.EstimatorNode):
     """Estimates (G_Pphi, G_Ptheta, G_Ppsi) of GRS1 and GRS2 from the star tracker and the voltages."""
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("scale_factor_estimator", **node_kwargs)
-        self.p = common.declare_parameters(self, "scale_factor_estimator")
-        self.instrument = common.instrument_from(self.p)
         self.estimator = make_scale_factor_estimator(self.instrument, self.p)
-        self.assembler = EpochAssembler(STREAMS, self.p["max_stream_silence_s"])
-        self.node_rejections = common.RejectionCounts()
-        self.reported_rejections: dict[str, dict[str, int]] = {}
         self.last_nis = float("nan")
         self.last_publish_ns = -1
-        self.last_checkpoint_ns = -1
-        self.last_data_wall = time.monotonic()
-        self.last_estimate: ScaleFactorEstimate | None = None
-        self._resume()
+        self.resume()
 
         t = messages.taiji2_msgs
         qos = common.raw_qos()
@@ -63,42 +52,25 @@ class ScaleFactorEstimatorNode(rclpy.node.Node):
                                                        f"/taiji2/estimates/grs{g}/scale_factors", qos)
                               for g in GRS_IDS}
         self.rate_pub = self.create_publisher(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, qos)
-        self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
-        steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
-        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
-        self.create_timer(0.5, self._release_silent, clock=steady)
         self.get_logger().info(f"method {self.p['method']}, nominal model {self.p['layout']}, publishing every "
                                f"{self.p['publish_period_s']} s of data")
 
-    # -- checkpoints ---------------------------------------------------------------------------
-    def _resume(self) -> None:
-        path = self.p["checkpoint_file"]
-        state = load_checkpoint(path) if path else None
-        if state is None:
-            return
-        if state.get("method") != self.p["method"]:
-            raise ValueError(f"checkpoint_file {path}: written by method {state.get('method')!r}, "
-                             f"not {self.p['method']!r}")
-        self.estimator.load_state_dict(state["estimator"])
-        self.assembler.load_state_dict(state["assembler"])
-        self.node_rejections.counts = state["node_rejections"]
-        self.get_logger().info(f"resumed from checkpoint {path} at t = {state['t_ns'] / 1e9:.1f} s")
+    def streams(self) -> Sequence[str]:
+        return STREAMS
 
-    def save_checkpoint(self, t_ns: int) -> None:
-        path = self.p["checkpoint_file"]
-        if path:
-            save_checkpoint(path, {"method": self.p["method"], "t_ns": t_ns,
-                                   "estimator": self.estimator.state_dict(),
-                                   "assembler": self.assembler.state_dict(),
-                                   "node_rejections": self.node_rejections.counts})
-            self.last_checkpoint_ns = t_ns
+    # -- checkpoints ---------------------------------------------------------------------------
+    def _checkpoint_payload(self) -> dict[str, Any]:
+        return {"estimator": self.estimator.state_dict()}
+
+    def _restore_payload(self, state: dict[str, Any]) -> None:
+        self.estimator.load_state_dict(state["estimator"])
 
     # -- input -----------------------------------------------------------------------------------
     def _on_star_tracker(self, msg: Any) -> None:
         if msg.header.frame_id not in ("crf", ""):
             self.node_rejections.add("star_tracker", "frame_id_mismatch")
             return
-        self._add("star_tracker", common.stamp_ns(msg.header), common.star_tracker_quaternion(msg))
+        self.add_sample("star_tracker", common.stamp_ns(msg.header), common.star_tracker_quaternion(msg))
 
     def _on_grs(self, msg: Any, grs_id: int) -> None:
         problem = common.grs_message_problem(msg, grs_id)
@@ -108,16 +80,7 @@ class ScaleFactorEstimatorNode(rclpy.node.Node):
                                    f"(grs_id {msg.grs_id}, frame_id {msg.header.frame_id!r})",
                                    throttle_duration_sec=10.0)
             return
-        self._add(f"grs{grs_id}", common.stamp_ns(msg.header), common.grs_voltages(msg))
-
-    def _add(self, stream: str, t_ns: int, payload: np.ndarray) -> None:
-        self.last_data_wall = time.monotonic()
-        for epoch in self.assembler.add(stream, t_ns, payload, self.last_data_wall):
-            self._process(epoch)
-
-    def _release_silent(self) -> None:
-        for epoch in self.assembler.expire(time.monotonic()):
-            self._process(epoch)
+        self.add_sample(f"grs{grs_id}", common.stamp_ns(msg.header), common.grs_voltages(msg))
 
     def _process(self, epoch: Any) -> None:
         voltages = {g: epoch.samples[f"grs{g}"] for g in GRS_IDS if f"grs{g}" in epoch.samples}
@@ -136,7 +99,7 @@ class ScaleFactorEstimatorNode(rclpy.node.Node):
         period_ns = int(self.p["publish_period_s"] * 1e9)
         if self.last_publish_ns < 0 or epoch.t_ns // period_ns > self.last_publish_ns // period_ns:
             self.publish_estimate(epoch.t_ns)
-        if self.last_checkpoint_ns < 0 or epoch.t_ns - self.last_checkpoint_ns >= self.p["checkpoint_period_s"] * 1e9:
+        if self.checkpoint_due(epoch.t_ns):
             self.save_checkpoint(epoch.t_ns)
 
     # -- output ----------------------------------------------------------------------------------
@@ -144,7 +107,7 @@ class ScaleFactorEstimatorNode(rclpy.node.Node):
         estimate = self.estimator.estimate()
         self.last_estimate = estimate
         self.last_publish_ns = t_ns
-        rejected = common.total(self.node_rejections.merged(estimate.rejected))
+        rejected = common.total(self.rejection_counts())
         t = messages.taiji2_msgs
         for index, gid in enumerate(GRS_IDS):
             msg = t.ScaleFactorEstimate(grs_id=gid, method=estimate.method)
@@ -168,24 +131,6 @@ class ScaleFactorEstimatorNode(rclpy.node.Node):
             msg.header.frame_id = "crf"
             msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in omega)
             self.rate_pub.publish(msg)
-
-    def _publish_diagnostics(self) -> None:
-        estimate = self.last_estimate
-        counts = self.node_rejections.merged(estimate.rejected if estimate else {}, {"epoch_alignment": {
-            f"{s}:{r}": n for s, reasons in self.assembler.refused.items() for r, n in reasons.items()}})
-        used = int(estimate.n_samples) if estimate else 0
-        starved = time.monotonic() - self.last_data_wall > self.p["starved_after_s"]
-        fresh = common.new_rejections(counts, self.reported_rejections)
-        self.reported_rejections = counts
-        level, text = common.health(estimate.nis_mean if estimate else float("nan"),
-                                    bool(estimate and estimate.determined), starved, fresh)
-        status = common.diagnostic("scale_factor_estimator", level, text, {
-            "method": self.p["method"], "samples_used": used, "rejected": counts,
-            "nis_mean": None if estimate is None else estimate.nis_mean,
-            "last_stamp_s": None if estimate is None else estimate.t_s})
-        array = messages.diagnostic_msgs.DiagnosticArray(status=[status])
-        common.set_stamp(array.header, self.last_publish_ns if self.last_publish_ns > 0 else 0)
-        self.diag_pub.publish(array)
 
     def destroy_node(self) -> None:
         # end of data: process what is still waiting for a late stream, publish and checkpoint
