@@ -54,7 +54,8 @@ def run_graph(layout: str, method: str, duration_s: float, seed: int) -> dict:
 
 
 def print_graph_tables(layout: str, runs: dict[str, dict], duration_s: float) -> None:
-    print(f"\n=== {layout}: paper's table beside ours (node graph, {duration_s / 3600:g} h, thruster force noise on) ===")
+    print(f"\n=== {layout}: paper's table beside ours (node graph, {duration_s / 3600:g} h, "
+          "thruster force noise on) ===")
     print("Scale factors [1e-8 rad s^-2 V^-1]: paper (published) | ours paper method | ours default (gls) | truth")
     for g in (1, 2):
         for k, name in enumerate(G_NAMES):

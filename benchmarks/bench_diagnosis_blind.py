@@ -1,0 +1,320 @@
+"""Blind benchmark of the sim-to-real gap diagnosis.
+
+Generates data sets of 3 h (Type-1 by default) with none, one or two catalog effects drawn at
+random (family, variant, sign, magnitude near the detection limit), plus data sets with an effect
+the diagnoser does not know (a catalog effect left out of its candidates, or an effect defined only
+here), and runs the diagnosis on the raw arrays only (the draw stays in this process's bookkeeping).
+Prints the score table:
+
+- top-1 attribution: the first accepted effect is the drawn one (strict), or one of its reported
+  aliases (alias-aware: signatures the data cannot tell apart, e.g. a torque gain g and an inertia
+  error -g on the same axis);
+- false alarms on clean data (any accepted effect or "unexplained");
+- magnitude error in sigmas (fitted minus drawn, over the fitted sigma);
+- held-out shrink of the correctly named effects;
+- out-of-catalog: "unexplained" (success) vs a confident wrong name.
+
+Magnitudes are drawn as k sigma, k uniform in [kmin, kmax] (default 4..12), sigma being the 1-sigma
+of the variant on these data (``variant_sensitivities`` on a clean reference run); the gain floor of
+the selection is 3.8 sigma, "detectable" means k >= 6 here. Catalog effects left out of the
+candidates are drawn at 15..30 sigma (a gap the diagnosis must see without the matching template).
+
+Usage::
+
+    python benchmarks/bench_diagnosis_blind.py [--sets 40] [--layout type1] [--seed 1] [--workers 2]
+        [--duration-s 10800] [--kmin 4] [--kmax 12] [--json results.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from multiprocessing import get_context
+from pathlib import Path
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):  # one BLAS thread per worker
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
+
+try:
+    from taiji2_estimator_pkg.diagnosis import FAMILIES, DiagnosisOptions, candidate_catalog, diagnose, prepare_input
+except ImportError:  # editable install made before the package had modules
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src" / "taiji2_estimator_pkg"))
+    from taiji2_estimator_pkg.diagnosis import FAMILIES, DiagnosisOptions, candidate_catalog, diagnose, prepare_input
+from taiji2_estimator_pkg.diagnosis.engine import variant_sensitivities  # noqa: E402
+from taiji2_estimator_pkg.diagnosis.model import NominalModel  # noqa: E402
+from taiji2_sim_pkg.core.config import load_config  # noqa: E402
+from taiji2_sim_pkg.core.effect_catalog import GravityGradient, make_effect  # noqa: E402
+from taiji2_sim_pkg.core.effects import Effect  # noqa: E402
+from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch  # noqa: E402
+
+EXCLUDABLE = ("readout_nonlinearity", "tm_stiffness", "thruster_force_leakage")
+
+
+class SinusoidalTorque(Effect):
+    """Out-of-catalog: a periodic disturbance torque (e.g. a mechanism), not among the candidates."""
+
+    name = "sinusoidal_torque"
+
+    def __init__(self, amplitude_n_m: float, frequency_hz: float, axis: int) -> None:
+        self.amplitude_n_m, self.frequency_hz, self.axis = amplitude_n_m, frequency_hz, axis
+
+    def applied_torque_n_m(self, t_s: np.ndarray, torque_n_m: np.ndarray) -> np.ndarray:
+        out = np.array(torque_n_m)
+        out[:, self.axis] += self.amplitude_n_m * np.sin(2 * np.pi * self.frequency_hz * t_s)
+        return out
+
+
+class GrsBiasStep(Effect):
+    """Out-of-catalog: a step in one linear GRS readout half-way through the run."""
+
+    name = "grs_bias_step"
+
+    def __init__(self, step_m_s2: float, grs: int, axis: int, t_step_s: float) -> None:
+        self.step_m_s2, self.grs, self.axis, self.t_step_s = step_m_s2, grs, axis, t_step_s
+
+    def grs_accelerations(self, t_s: np.ndarray, grs_id: int, angular: np.ndarray, linear: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+        if grs_id != self.grs:
+            return angular, linear
+        out = np.array(linear)
+        out[:, self.axis] += np.where(t_s >= self.t_step_s, self.step_m_s2, 0.0)
+        return angular, out
+
+
+def _draw_effect(rng: np.random.Generator, families: list[str], sigmas: dict[str, float], kmin: float, kmax: float,
+                 model: NominalModel, by_family: dict[str, list], noise: object) -> dict:
+    family = str(rng.choice(families))
+    k = float(rng.uniform(kmin, kmax))
+    sign = float(rng.choice([-1.0, 1.0]))
+    if family == "star_tracker_lowfreq_noise":
+        kappa = k * sigmas[family]
+        spec = noise.inject(np.array([kappa]), model)  # type: ignore[attr-defined]
+        return {"family": family, "variant": family, "k": k, "spec": spec, "truth": {family: math.sqrt(kappa)}}
+    candidate = by_family[family][int(rng.integers(len(by_family[family])))]
+    magnitude = sign * k * sigmas[candidate.key]
+    if family == "gravity_gradient":
+        phase = float(rng.uniform(0, 2 * np.pi))
+        theta = np.array([abs(magnitude) * math.cos(phase), abs(magnitude) * math.sin(phase)])
+        spec = candidate.inject(theta, model)
+        effect = GravityGradient(orbit_period_s=spec["orbit_period_s"], scale=spec["scale"])
+        _, tau_c, tau_s = effect.harmonic_coefficients_n_m(model.inertia_kg_m2)
+        truth = {f"gravity_gradient[{'xyz'[a]}]": float(np.hypot(tau_c[a], tau_s[a])) for a in range(3)}
+        return {"family": family, "variant": candidate.key, "k": k, "spec": spec, "truth": truth}
+    spec = candidate.inject(np.array([magnitude]), model)
+    return {"family": family, "variant": candidate.key, "k": k, "spec": spec, "truth": {candidate.key: magnitude}}
+
+
+def make_plan(count: int, seed: int, sigmas: dict[str, float], model: NominalModel, kmin: float, kmax: float,
+              clean: int | None = None) -> list[dict]:
+    """The hidden draw of every data set (``clean``: number of clean sets, default 20 %)."""
+    rng = np.random.default_rng(seed)
+    candidates, noise = candidate_catalog()
+    by_family: dict[str, list] = {}
+    for candidate in candidates:
+        by_family.setdefault(candidate.name, []).append(candidate)
+    families = list(FAMILIES)
+    n_clean = max(4, round(0.2 * count)) if clean is None else clean
+    rest = count - n_clean
+    n_out = max(3, round(0.15 * count)) if rest > 0 else 0
+    n_two = max(3, round(0.15 * count)) if rest > 0 else 0
+    n_one = max(0, rest - n_out - n_two)
+    plan = []
+    for _ in range(n_clean):
+        plan.append({"kind": "clean", "effects": []})
+    for _ in range(n_one):
+        plan.append({"kind": "one", "effects": [_draw_effect(rng, families, sigmas, kmin, kmax, model, by_family,
+                                                            noise)]})
+    for _ in range(n_two):
+        first = _draw_effect(rng, families, sigmas, kmin, kmax, model, by_family, noise)
+        second = _draw_effect(rng, [f for f in families if f != first["family"]], sigmas, kmin, kmax, model,
+                              by_family, noise)
+        plan.append({"kind": "two", "effects": [first, second]})
+    for i in range(n_out):
+        if i % 2 == 0:
+            left_out = EXCLUDABLE[(i // 2) % len(EXCLUDABLE)]
+            drawn = _draw_effect(rng, [left_out], sigmas, 15.0, 30.0, model, by_family, noise)
+            plan.append({"kind": "out_of_catalog", "effects": [drawn], "exclude": left_out})
+        elif i % 4 == 1:
+            plan.append({"kind": "out_of_catalog", "private": {"name": "sinusoidal_torque",
+                         "amplitude_n_m": float(rng.uniform(1.5e-8, 3e-8)), "frequency_hz": float(rng.uniform(
+                             2e-3, 8e-3)), "axis": int(rng.integers(3))}, "effects": []})
+        else:
+            plan.append({"kind": "out_of_catalog", "private": {"name": "grs_bias_step",
+                         "step_m_s2": float(rng.choice([-1, 1]) * rng.uniform(1e-12, 2e-12)),
+                         "grs": int(rng.integers(1, 3)), "axis": int(rng.integers(3)), "t_step_s": 5400.0},
+                         "effects": []})
+    order = rng.permutation(len(plan))
+    return [dict(plan[i], index=int(j), seed=int(seed * 1000 + j)) for j, i in enumerate(order)]
+
+
+def _private(spec: dict) -> Effect:
+    spec = dict(spec)
+    name = spec.pop("name")
+    return SinusoidalTorque(**spec) if name == "sinusoidal_torque" else GrsBiasStep(**spec)
+
+
+def run_one(args: tuple[dict, str, float]) -> dict:
+    """Simulate one data set and diagnose it from the raw arrays only."""
+    entry, layout, duration_s = args
+    config = load_config(layout)
+    n = round(duration_s * config.sample_rate_hz)
+    commands = maneuver_torque_commands(config, n)
+    effects = [make_effect(**e["spec"]) for e in entry["effects"]]
+    if entry.get("private"):
+        effects.append(_private(entry["private"]))
+    effects.sort(key=lambda e: e.name == "time_offset")
+    out = simulate_batch(config, entry["seed"], commands, effects=effects)
+    inp = prepare_input(out.t_s, out.st_quat_xyzw, out.voltages_v, commands, config.sample_rate_hz)
+    families = tuple(f for f in FAMILIES if f != entry.get("exclude"))
+    started = time.perf_counter()
+    result = diagnose(inp, config, DiagnosisOptions(candidates=families))  # the raw arrays and the layout only
+    elapsed = time.perf_counter() - started
+    effects_out = [{"key": e.key, "name": e.name, "magnitude": e.magnitude, "sigma": e.sigma, "accepted": e.accepted,
+                    "aliases": e.aliases, "shrink": e.shrink, "shrink_heldout": e.shrink_heldout,
+                    "heldout_z": e.heldout_z} for e in result.effects if e.accepted]
+    return {"index": entry["index"], "kind": entry["kind"], "drawn": entry["effects"], "private": entry.get("private"),
+            "exclude": entry.get("exclude"), "status": result.status, "verdict": result.verdict,
+            "accepted": effects_out, "seconds": elapsed}
+
+
+def _family(key: str) -> str:
+    return key.split("[")[0]
+
+
+def score(results: list[dict]) -> dict:
+    """Score table."""
+    table: dict[str, object] = {}
+    clean = [r for r in results if r["kind"] == "clean"]
+    false_alarms = [r for r in clean if r["verdict"]["effects"] or r["verdict"]["unexplained"]]
+    table["clean_sets"] = len(clean)
+    table["false_alarms"] = len(false_alarms)
+    rows = []
+    for r in results:
+        if r["kind"] not in ("one", "two"):
+            continue
+        for position, drawn in enumerate(r["drawn"]):
+            accepted = r["accepted"]
+            top = accepted[0] if accepted else None
+            drawn_family = drawn["family"]
+            strict = top is not None and any(top["name"] == d["family"] for d in r["drawn"])
+            alias = strict or (top is not None and any(_family(a) == d["family"] for a in top["aliases"]
+                                                       for d in r["drawn"]))
+            found = next((a for a in accepted if a["name"] == drawn_family), None)
+            if found is None:
+                found = next((a for a in accepted if any(_family(x) == drawn_family for x in a["aliases"])), None)
+            z = None
+            if found is not None and found["key"] in drawn["truth"]:
+                truth = drawn["truth"][found["key"]]
+                z = (found["magnitude"] - truth) / found["sigma"] if found["sigma"] else None
+            rows.append({"kind": r["kind"], "family": drawn_family, "k": drawn["k"], "first": position == 0,
+                         "top1_strict": strict, "top1_alias": alias, "found": found is not None, "z": z,
+                         "shrink_heldout": found["shrink_heldout"] if found else None,
+                         "heldout_z": found["heldout_z"] if found else None,
+                         "unexplained": r["verdict"]["unexplained"]})
+    one = [x for x in rows if x["kind"] == "one"]
+    detectable = [x for x in one if x["k"] >= 6.0]
+    for label, group in (("single", one), ("single_detectable", detectable)):
+        table[f"{label}_sets"] = len(group)
+        table[f"{label}_top1_strict"] = sum(x["top1_strict"] for x in group) / max(len(group), 1)
+        table[f"{label}_top1_alias_aware"] = sum(x["top1_alias"] for x in group) / max(len(group), 1)
+        table[f"{label}_found"] = sum(x["found"] for x in group) / max(len(group), 1)
+    two = [r for r in results if r["kind"] == "two"]
+    two_rows = [x for x in rows if x["kind"] == "two"]
+    table["two_sets"] = len(two)
+    table["two_top1_in_drawn"] = sum(x["top1_alias"] for x in two_rows if x["first"]) / max(len(two), 1)
+    def covered(r: dict, drawn: dict) -> bool:
+        return any(a["name"] == drawn["family"] or any(_family(x) == drawn["family"] for x in a["aliases"])
+                   for a in r["accepted"])
+
+    table["two_both_found"] = sum(all(covered(r, d) for d in r["drawn"]) for r in two) / max(len(two), 1)
+    zs = np.array([x["z"] for x in rows if x["z"] is not None])
+    table["magnitude_error_sigma_median_abs"] = float(np.median(np.abs(zs))) if zs.size else None
+    table["magnitude_error_sigma_rms"] = float(np.sqrt(np.mean(zs ** 2))) if zs.size else None
+    table["magnitude_within_3_sigma"] = float(np.mean(np.abs(zs) <= 3.0)) if zs.size else None
+    shrinks = np.array([x["shrink_heldout"] for x in rows if x["found"] and x["shrink_heldout"] is not None])
+    table["heldout_shrink_median"] = float(np.median(shrinks)) if shrinks.size else None
+    table["heldout_shrink_positive"] = float(np.mean(shrinks > 0)) if shrinks.size else None
+    hz = np.array([x["heldout_z"] for x in rows if x["found"] and x["heldout_z"] is not None])
+    table["heldout_z_median"] = float(np.median(hz)) if hz.size else None
+    out = [r for r in results if r["kind"] == "out_of_catalog"]
+    table["out_of_catalog_sets"] = len(out)
+    table["out_of_catalog_unexplained"] = sum(r["verdict"]["unexplained"] for r in out) / max(len(out), 1)
+    table["out_of_catalog_confident_wrong"] = sum((not r["verdict"]["unexplained"]) and bool(r["verdict"]["effects"])
+                                                  for r in out) / max(len(out), 1)
+    table["out_of_catalog_missed"] = sum((not r["verdict"]["unexplained"]) and not r["verdict"]["effects"]
+                                         for r in out) / max(len(out), 1)
+    per_family = {}
+    for family in FAMILIES:
+        group = [x for x in one if x["family"] == family]
+        if group:
+            per_family[family] = f"{sum(x['top1_alias'] for x in group)}/{len(group)}"
+    table["single_top1_alias_aware_by_family"] = per_family
+    table["seconds_median"] = float(np.median([r["seconds"] for r in results]))
+    table["seconds_max"] = float(np.max([r["seconds"] for r in results]))
+    return table
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sets", type=int, default=40)
+    parser.add_argument("--layout", default="type1")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--duration-s", type=float, default=10800.0)
+    parser.add_argument("--kmin", type=float, default=4.0)
+    parser.add_argument("--kmax", type=float, default=12.0)
+    parser.add_argument("--clean", type=int, default=None, help="number of clean sets (default 20 %%)")
+    parser.add_argument("--json", default="", help="write the per-set results and the table here")
+    args = parser.parse_args()
+    workers = max(1, min(args.workers, 2))
+    config = load_config(args.layout)
+    model = NominalModel.from_config(config)
+    started = time.perf_counter()
+    n = round(args.duration_s * config.sample_rate_hz)
+    commands = maneuver_torque_commands(config, n)
+    reference = simulate_batch(config, 10**6 + args.seed, commands)
+    sigmas = variant_sensitivities(prepare_input(reference.t_s, reference.st_quat_xyzw, reference.voltages_v,
+                                                 commands, config.sample_rate_hz), config)
+    print(f"variant sensitivities on a clean reference run: {time.perf_counter() - started:.1f} s", file=sys.stderr)
+    plan = make_plan(args.sets, args.seed, sigmas, model, args.kmin, args.kmax, args.clean)
+    results = []
+    context = get_context("fork" if os.name == "posix" else "spawn")
+    with context.Pool(workers) as pool:
+        for result in pool.imap_unordered(run_one, [(entry, args.layout, args.duration_s) for entry in plan]):
+            results.append(result)
+            drawn = ", ".join(f"{d['variant']} ({d['k']:.1f} sigma)" for d in result["drawn"]) or (
+                result["private"]["name"] if result["private"] else "none")
+            if result["exclude"]:
+                drawn += f" [{result['exclude']} left out]"
+            got = ", ".join(a["key"] for a in result["accepted"]) or "-"
+            print(f"[{len(results):3d}/{len(plan)}] {result['kind']:15s} drawn: {drawn:60s} -> {got}"
+                  f"{' UNEXPLAINED' if result['verdict']['unexplained'] else ''} ({result['seconds']:.1f} s)",
+                  file=sys.stderr, flush=True)
+    table = score(sorted(results, key=lambda r: r["index"]))
+    print(f"\nblind benchmark: {len(plan)} data sets of {args.duration_s / 3600:.1f} h, layout {args.layout}, "
+          f"magnitudes {args.kmin:g}..{args.kmax:g} sigma, wall {time.perf_counter() - started:.0f} s")
+    width = max(len(k) for k in table)
+    for key, value in table.items():
+        shown = f"{value:.3f}" if isinstance(value, float) else value
+        print(f"  {key:{width}s}  {shown}")
+    goals = [("top-1 (alias-aware) at detectable magnitudes >= 0.90", table["single_detectable_sets"],
+              table["single_detectable_top1_alias_aware"] >= 0.9),
+             ("false alarms on clean data <= 5 %", table["clean_sets"],
+              table["false_alarms"] <= 0.05 * max(table["clean_sets"], 1)),
+             ("out-of-catalog: no confident wrong name", table["out_of_catalog_sets"],
+              table["out_of_catalog_confident_wrong"] == 0.0)]
+    for label, sets, ok in goals:
+        print(f"  goal {label}: {'n/a (no such sets)' if not sets else 'met' if ok else 'NOT met'}")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"table": table, "results": results}, indent=1, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
