@@ -1,0 +1,38 @@
+"""Sim-to-real gap diagnosis: where the gap lies, which unmodelled effect causes it, how far it shrinks.
+
+Numerical core (numpy, scipy; matplotlib only for the plots of :mod:`.report`), no middleware.
+Entry points:
+
+- :func:`diagnose` (raw arrays in a :class:`DiagnosisInput` + the nominal model) ->
+  :class:`DiagnosisResult`;
+- :func:`prepare_input` / :func:`align_streams`: raw arrays or separately stamped streams ->
+  :class:`DiagnosisInput`;
+- :func:`write_report`: ``report.md``, ``report.json`` and PNG plots.
+
+See ``docs/diagnosis.md``.
+"""
+
+from .candidates import FAMILIES, Candidate, NoiseCandidate, candidate_catalog
+from .engine import DiagnosisOptions, DiagnosisResult, EffectReport, diagnose, variant_sensitivities
+from .inputs import DiagnosisInput, InputError, align_streams, commands_on_grid, prepare_input
+from .model import NominalModel
+from .report import write_report
+
+__all__ = [
+    "FAMILIES",
+    "Candidate",
+    "DiagnosisInput",
+    "DiagnosisOptions",
+    "DiagnosisResult",
+    "EffectReport",
+    "InputError",
+    "NoiseCandidate",
+    "NominalModel",
+    "align_streams",
+    "candidate_catalog",
+    "commands_on_grid",
+    "diagnose",
+    "prepare_input",
+    "variant_sensitivities",
+    "write_report",
+]

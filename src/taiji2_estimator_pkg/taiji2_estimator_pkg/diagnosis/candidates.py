@@ -1,0 +1,496 @@
+"""Candidate model extensions: each catalog effect as a signature in the residual channels.
+
+Every catalog effect (:mod:`taiji2_sim_pkg.core.effect_catalog`) is split into *variants*, one per
+GRS / axis / readout it can act on, each with one parameter (two for the gravity gradient: the
+quadrature pair of its 2n harmonic), in the SI unit of the simulator's parameter, so that a fitted
+magnitude can be compared with an injected one. A variant's columns are the first-order change
+of the 15 channels per unit parameter, derived from the calibrated data at the linearization
+point (:func:`.channels.perturbation_channels`). The star-tracker low-frequency noise is a noise
+candidate: it changes the channel spectrum, not the residual (:class:`NoiseCandidate`).
+
+Signatures (data side, per unit magnitude; ``^pred`` = predicted from the commanded torque,
+``^data`` = calibrated measurement; ``tc = t - t_mid``):
+
+======================================  ==========================================================
+scale_factor_drift[grs.pair]            angular and linear readout of the pair times ``-tc``
+cross_coupling[grs.misalign_c]          ``-e_c x a`` on every angular and linear readout (TMRF)
+cross_coupling[grs.imbalance_e]         angular ``+= l^data_e / r``, linear ``+= r alpha^pred_e``
+time_offset                             star-tracker attitude ``-omega``
+thruster_torque_gain[k]                 torque channel ``+ J^-1 e_k tau_cmd,k``
+com_drift[grs|both.c]                   linear ``+ tc (alpha^pred x e_c)`` of the GRS concerned
+readout_nonlinearity[grs.readout]       readout ``+ k m^2 - 2 k^2 m^3 + 5 k^3 m^4 - 14 k^4 m^5``
+                                        (m the measured readout: the exact inverse of
+                                        ``m = a + k a^2``; fitted by its series, see
+                                        :meth:`.record.Record.series_fit`)
+inertia_error[k] / [kl]                 torque channel ``- J^-1 dJ alpha^pred``
+gravity_gradient[k]                     torque channel ``+ J^-1 e_k (cos 2nt, sin 2nt)``
+tm_stiffness[grs.c]                     linear readout ``- H(s) l^data``
+thruster_force_leakage[c.k]             spacecraft acceleration ``+ e_c tau_cmd,k / M``
+star_tracker_lowfreq_noise              star-tracker channel PSD ``+ f_knee^2 x template``
+======================================  ==========================================================
+
+Regressors are noise-free predictions wherever the measured quantity carries the noise of a
+channel the column enters with the same sign structure (errors-in-variables bias, see
+:class:`.channels.Linearization`); a cross product or a square of the measurement is unbiased.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.signal import lfilter
+
+from taiji2_sim_pkg.core.effect_catalog import (
+    ANGULAR_READOUTS,
+    ELECTRODE_PAIRS,
+    LINEAR_READOUTS,
+    GravityGradient,
+    suspension_filter,
+)
+from taiji2_sim_pkg.core.frames import cross
+
+from .channels import Linearization, Readouts, perturbation_channels
+from .model import NominalModel
+
+__all__ = ["FAMILIES", "Candidate", "CandidateContext", "NoiseCandidate", "candidate_catalog"]
+
+FAMILIES = ("scale_factor_drift", "cross_coupling", "time_offset", "star_tracker_lowfreq_noise",
+            "thruster_torque_gain", "com_drift", "readout_nonlinearity", "inertia_error", "gravity_gradient",
+            "tm_stiffness", "thruster_force_leakage")
+"""Effect families the diagnosis knows (the catalog of the simulator)."""
+
+_AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class CandidateContext:
+    """What a signature needs: the linearization point, raw readouts, model and options.
+
+    Attributes
+    ----------
+    lin : Linearization
+    readouts : Readouts
+    model : NominalModel
+    orbit_period_s : float
+        Orbit period of the gravity-gradient candidate [s].
+    suspension_hz, damping : float
+        Suspension of the tm_stiffness candidate.
+    t_mid_s : float
+        Reference time of the drifts [s] (middle of the full record).
+    """
+
+    lin: Linearization
+    readouts: Readouts
+    model: NominalModel
+    orbit_period_s: float
+    suspension_hz: float
+    damping: float
+    t_mid_s: float
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One variant of a catalog effect, linear in its parameters.
+
+    Attributes
+    ----------
+    name : str
+        Effect family (catalog name).
+    variant : str
+        Where it acts, e.g. ``"grs1.y"``.
+    params : tuple of str
+        Parameter names (one, or the quadrature pair of the gravity gradient).
+    unit : str
+        Unit of the magnitude.
+    build : callable
+        ``build(ctx) -> list of (n, 15) columns``.
+    inject : callable
+        ``inject(theta, model) -> dict``: the catalog effect (``{"name": ..., params}``) that
+        produces this variant with these parameters (benchmarks, tests).
+    series : callable or None
+        ``series(ctx) -> columns c_1..c_m`` of a signature that is a polynomial in its (single)
+        parameter: the channel change is ``sum_j coefficients(theta)_j c_j`` exactly to the order
+        kept. Used when the second order matters (the readout nonlinearity: the square of the
+        *measured* readout carries ``2 k a^3``, which for a readout that is a single square wave,
+        whose square is nearly constant, can outweigh the first-order signature); None: linear.
+    coefficients : callable or None
+        ``coefficients(theta) -> (m,)`` weights of the series columns.
+    bound : callable or None
+        ``bound(ctx) -> |theta| max`` where the series holds (for the nonlinearity: k a_max = 0.2).
+    """
+
+    name: str
+    variant: str
+    params: tuple[str, ...]
+    unit: str
+    build: Callable[[CandidateContext], list[np.ndarray]]
+    inject: Callable[[np.ndarray, NominalModel], dict[str, Any]]
+    series: Callable[[CandidateContext], list[np.ndarray]] | None = None
+    coefficients: Callable[[float], np.ndarray] | None = None
+    bound: Callable[[CandidateContext], float] | None = None
+
+    def series_names(self) -> list[str]:
+        """Names of the series columns."""
+        return [f"{self.key}:series{j}" for j in range(len(self.coefficients(1.0)))] if self.coefficients else []
+
+    @property
+    def key(self) -> str:
+        """``name[variant]``."""
+        return f"{self.name}[{self.variant}]" if self.variant else self.name
+
+    @property
+    def n_params(self) -> int:
+        """Number of parameters."""
+        return len(self.params)
+
+    def magnitude(self, theta: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
+        """Magnitude and its 1-sigma: the parameter, or the amplitude of a quadrature pair."""
+        theta = np.asarray(theta, dtype=np.float64)
+        if theta.size == 1:
+            return float(theta[0]), float(math.sqrt(max(cov[0, 0], 0.0)))
+        amplitude = float(np.hypot(*theta))
+        if amplitude == 0.0:
+            return 0.0, float(math.sqrt(max(np.trace(cov) / 2.0, 0.0)))
+        gradient = theta / amplitude
+        return amplitude, float(math.sqrt(max(gradient @ cov @ gradient, 0.0)))
+
+    def column_names(self) -> list[str]:
+        """Names of the design columns."""
+        return [f"{self.key}:{p}" for p in self.params]
+
+
+@dataclass(frozen=True)
+class NoiseCandidate:
+    """Star-tracker noise rising at low frequency (a spectral, not a residual, signature).
+
+    The fitted amplitude is f_knee^2 [Hz^2] of :class:`~taiji2_sim_pkg.core.effect_catalog.StarTrackerLowFreqNoise`
+    (common to the three axes); the magnitude reported is f_knee [Hz].
+    """
+
+    name: str = "star_tracker_lowfreq_noise"
+    variant: str = ""
+    params: tuple[str, ...] = ("knee_hz_squared",)
+    unit: str = "Hz"
+    corner_hz: float = 1e-5
+
+    @property
+    def key(self) -> str:
+        """The family name."""
+        return self.name
+
+    @property
+    def n_params(self) -> int:
+        """One amplitude."""
+        return 1
+
+    def inject(self, theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        """Catalog effect for a knee of ``sqrt(theta)``."""
+        return {"name": self.name, "knee_hz": float(math.sqrt(max(float(np.ravel(theta)[0]), 0.0))),
+                "corner_hz": self.corner_hz}
+
+    @staticmethod
+    def magnitude(kappa: float, sigma_kappa: float) -> tuple[float, float]:
+        """(f_knee, sigma) from the fitted f_knee^2 and its sigma (delta method, sigma of sqrt)."""
+        knee = math.sqrt(max(kappa, 0.0))
+        if knee > 0.0:
+            return knee, sigma_kappa / (2.0 * knee)
+        return 0.0, math.sqrt(max(sigma_kappa, 0.0))
+
+
+# ------------------------------------------------------------------------------------------------
+# signature helpers
+# ------------------------------------------------------------------------------------------------
+
+
+def _tmrf_to_crf_column(ctx: CandidateContext, grs: int, axis: int, series: np.ndarray) -> np.ndarray:
+    """(n, 2, 3) with GRS ``grs``'s CRF image of a series on TMRF axis ``axis``."""
+    out = np.zeros((series.shape[0], 2, 3))
+    out[:, grs] = np.outer(series, ctx.model.p_crf[grs][:, axis])
+    return out
+
+
+def _tmrf_vector_to_crf(ctx: CandidateContext, grs: int, vectors: np.ndarray) -> np.ndarray:
+    out = np.zeros((vectors.shape[0], 2, 3))
+    out[:, grs] = vectors @ ctx.model.p_crf[grs].T
+    return out
+
+
+def _centred_time(ctx: CandidateContext) -> np.ndarray:
+    return ctx.readouts.t_s - ctx.t_mid_s
+
+
+def _torque_column(ctx: CandidateContext, torque: np.ndarray) -> np.ndarray:
+    """Channels of an unmodelled torque (n, 3) [N m] (or angular acceleration already)."""
+    return perturbation_channels(ctx.lin, ctx.model, dtorque=torque @ ctx.model.inertia_inv.T)
+
+
+def _unit(axis: int) -> np.ndarray:
+    vector = np.zeros(3)
+    vector[axis] = 1.0
+    return vector
+
+
+# ------------------------------------------------------------------------------------------------
+# the catalog
+# ------------------------------------------------------------------------------------------------
+
+
+def _scale_factor_drift(grs: int, pair: str) -> Candidate:
+    angular, linear = ELECTRODE_PAIRS[pair]
+
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        tc = _centred_time(ctx)
+        dg = _tmrf_to_crf_column(ctx, grs, angular, -tc * ctx.lin.ghat_pred[:, grs, angular])
+        dl = _tmrf_to_crf_column(ctx, grs, linear, -tc * ctx.lin.lhat_pred[:, grs, linear])
+        return [perturbation_channels(ctx.lin, ctx.model, dg=dg, dl=dl)]
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "scale_factor_drift", "rate_per_s": float(theta[0]), "grs": grs + 1, "axis": pair}
+
+    return Candidate("scale_factor_drift", f"grs{grs + 1}.{pair}", ("rate_per_s",), "1/s", build, inject)
+
+
+def _misalignment(grs: int, axis: int) -> Candidate:
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        eps = _unit(axis)
+        dg = _tmrf_vector_to_crf(ctx, grs, -cross(eps, ctx.lin.ghat[:, grs]))
+        dl = _tmrf_vector_to_crf(ctx, grs, -cross(eps, ctx.lin.lhat[:, grs]))
+        return [perturbation_channels(ctx.lin, ctx.model, dg=dg, dl=dl)]
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "cross_coupling", "grs": grs + 1, "misalignment_rad": (float(theta[0]) * _unit(axis)).tolist()}
+
+    return Candidate("cross_coupling", f"grs{grs + 1}.misalign_{_AXES[axis]}", ("misalignment_rad",), "rad",
+                     build, inject)
+
+
+def _imbalance(grs: int, pair: str) -> Candidate:
+    angular, linear = ELECTRODE_PAIRS[pair]
+    pair_index = _AXES.index(pair)
+
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        r = ctx.model.ratio_m
+        dg = _tmrf_to_crf_column(ctx, grs, angular, ctx.lin.lhat[:, grs, linear] / r)
+        dl = _tmrf_to_crf_column(ctx, grs, linear, r * ctx.lin.ghat_pred[:, grs, angular])
+        return [perturbation_channels(ctx.lin, ctx.model, dg=dg, dl=dl)]
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "cross_coupling", "grs": grs + 1, "imbalance": (float(theta[0]) * _unit(pair_index)).tolist()}
+
+    return Candidate("cross_coupling", f"grs{grs + 1}.imbalance_{pair}", ("imbalance",), "1", build, inject)
+
+
+def _time_offset() -> Candidate:
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        return [perturbation_channels(ctx.lin, ctx.model, datt=-ctx.lin.omega)]
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "time_offset", "offset_s": float(theta[0])}
+
+    return Candidate("time_offset", "", ("offset_s",), "s", build, inject)
+
+
+def _torque_gain(axis: int) -> Candidate:
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        torque = np.zeros_like(ctx.readouts.torque_cmd_n_m)
+        torque[:, axis] = ctx.readouts.torque_cmd_n_m[:, axis]
+        return [_torque_column(ctx, torque)]
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "thruster_torque_gain", "gain": float(theta[0]), "axis": _AXES[axis]}
+
+    return Candidate("thruster_torque_gain", _AXES[axis], ("gain",), "1", build, inject)
+
+
+def _com_drift(which: int, axis: int) -> Candidate:
+    grs_list = (0, 1) if which == 0 else (which - 1,)
+
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        tc = _centred_time(ctx)
+        motion = tc[:, None] * cross(ctx.lin.acc_pred, _unit(axis))
+        dl = np.zeros((tc.shape[0], 2, 3))
+        for g in grs_list:
+            dl[:, g] = motion
+        return [perturbation_channels(ctx.lin, ctx.model, dl=dl)]
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "com_drift", "rate_m_s": (float(theta[0]) * _unit(axis)).tolist(), "grs": which}
+
+    label = "both" if which == 0 else f"grs{which}"
+    return Candidate("com_drift", f"{label}.{_AXES[axis]}", ("rate_m_s",), "m/s", build, inject)
+
+
+def _nonlinearity(grs: int, readout: str) -> Candidate:
+    def powers(ctx: CandidateContext, exponents: Sequence[int]) -> list[np.ndarray]:
+        if readout in ANGULAR_READOUTS:
+            axis = ANGULAR_READOUTS.index(readout)
+            measured = ctx.lin.ghat[:, grs, axis]
+            return [perturbation_channels(ctx.lin, ctx.model, dg=_tmrf_to_crf_column(ctx, grs, axis, measured ** p))
+                    for p in exponents]
+        axis = LINEAR_READOUTS.index(readout)
+        measured = ctx.lin.lhat[:, grs, axis]
+        return [perturbation_channels(ctx.lin, ctx.model, dl=_tmrf_to_crf_column(ctx, grs, axis, measured ** p))
+                for p in exponents]
+
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        return powers(ctx, (2,))
+
+    def series(ctx: CandidateContext) -> list[np.ndarray]:
+        return powers(ctx, (2, 3, 4, 5))
+
+    def coefficients(theta: float) -> np.ndarray:
+        # a_meas = a + k a^2 inverted: k a^2 = k m^2 - 2 k^2 m^3 + 5 k^3 m^4 - 14 k^4 m^5 + ... (m = a_meas)
+        return np.array([theta, -2.0 * theta ** 2, 5.0 * theta ** 3, -14.0 * theta ** 4])
+
+    unit = "1/(rad s^-2)" if readout in ANGULAR_READOUTS else "1/(m s^-2)"
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "readout_nonlinearity", "k": float(theta[0]), "grs": grs + 1, "readout": readout}
+
+    def bound(ctx: CandidateContext) -> float:
+        if readout in ANGULAR_READOUTS:
+            measured = ctx.lin.ghat[:, grs, ANGULAR_READOUTS.index(readout)]
+        else:
+            measured = ctx.lin.lhat[:, grs, LINEAR_READOUTS.index(readout)]
+        return 0.2 / max(float(np.max(np.abs(measured))), 1e-300)  # the series to ~1 %: k a < 0.2
+
+    return Candidate("readout_nonlinearity", f"grs{grs + 1}.{readout}", ("k",), unit, build, inject, series,
+                     coefficients, bound)
+
+
+def _inertia_diagonal(axis: int) -> Candidate:
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        torque = np.zeros_like(ctx.lin.acc_pred)
+        torque[:, axis] = -ctx.model.inertia_kg_m2[axis, axis] * ctx.lin.acc_pred[:, axis]
+        return [_torque_column(ctx, torque)]
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "inertia_error", "relative": (float(theta[0]) * _unit(axis)).tolist()}
+
+    return Candidate("inertia_error", _AXES[axis], ("relative",), "1", build, inject)
+
+
+def _inertia_product(first: int, second: int) -> Candidate:
+    index = {(0, 1): 0, (0, 2): 1, (1, 2): 2}[(first, second)]
+
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        torque = np.zeros_like(ctx.lin.acc_pred)
+        torque[:, first] = -ctx.lin.acc_pred[:, second]
+        torque[:, second] = -ctx.lin.acc_pred[:, first]
+        return [_torque_column(ctx, torque)]
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        products = np.zeros(3)
+        products[index] = float(theta[0])
+        return {"name": "inertia_error", "products_kg_m2": products.tolist()}
+
+    return Candidate("inertia_error", f"{_AXES[first]}{_AXES[second]}", ("product_kg_m2",), "kg m^2", build, inject)
+
+
+def _gravity_gradient(axis: int, orbit_period_s: float) -> Candidate:
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        rate = 2.0 * math.pi / ctx.orbit_period_s
+        start = ctx.readouts.t_s - ctx.readouts.dt_s  # torque held over the step from its start
+        columns = []
+        for wave in (np.cos, np.sin):
+            torque = np.zeros((start.shape[0], 3))
+            torque[:, axis] = wave(2.0 * rate * start)
+            columns.append(_torque_column(ctx, torque))
+        return columns
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        effect = GravityGradient(orbit_period_s=orbit_period_s)
+        _, tau_c, tau_s = effect.harmonic_coefficients_n_m(model.inertia_kg_m2)
+        unit_amplitude = float(np.hypot(tau_c[axis], tau_s[axis]))
+        return {"name": "gravity_gradient", "orbit_period_s": orbit_period_s,
+                "scale": float(np.hypot(*theta)) / unit_amplitude if unit_amplitude > 0 else 0.0}
+
+    return Candidate("gravity_gradient", _AXES[axis], ("cos_n_m", "sin_n_m"), "N m", build, inject)
+
+
+def _tm_stiffness(grs: int, axis: int, suspension_hz: float, damping: float) -> Candidate:
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        b, a = suspension_filter(ctx.suspension_hz, ctx.damping, ctx.model.sample_rate_hz)
+        lag = lfilter(b, a, ctx.lin.lhat[:, grs, axis])
+        dl = _tmrf_to_crf_column(ctx, grs, axis, -lag)
+        return [perturbation_channels(ctx.lin, ctx.model, dl=dl)]
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "tm_stiffness", "stiffness_s2": float(theta[0]), "grs": grs + 1, "axis": _AXES[axis],
+                "suspension_hz": suspension_hz, "damping": damping}
+
+    return Candidate("tm_stiffness", f"grs{grs + 1}.{_AXES[axis]}", ("stiffness_s2",), "s^-2", build, inject)
+
+
+def _force_leakage(force_axis: int, torque_axis: int) -> Candidate:
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        acc = np.zeros_like(ctx.readouts.torque_cmd_n_m)
+        acc[:, force_axis] = ctx.readouts.torque_cmd_n_m[:, torque_axis] / ctx.model.mass_kg
+        return [perturbation_channels(ctx.lin, ctx.model, dacc=acc)]
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        matrix = np.zeros((3, 3))
+        matrix[force_axis, torque_axis] = float(theta[0])
+        return {"name": "thruster_force_leakage", "leakage_per_m": matrix.tolist()}
+
+    return Candidate("thruster_force_leakage", f"F{_AXES[force_axis]}.T{_AXES[torque_axis]}", ("leakage_per_m",),
+                     "1/m", build, inject)
+
+
+def candidate_catalog(families: Sequence[str] | None = None, orbit_period_s: float = 86164.1,
+                      suspension_hz: float = 0.01, damping: float = 0.7, st_corner_hz: float = 1e-5,
+                      ) -> tuple[list[Candidate], NoiseCandidate | None]:
+    """All variants of the chosen effect families.
+
+    Parameters
+    ----------
+    families : sequence of str, optional
+        Names from :data:`FAMILIES` (default: all).
+    orbit_period_s : float
+        Orbit period of the gravity-gradient candidate [s].
+    suspension_hz, damping : float
+        Suspension of the tm_stiffness candidate.
+    st_corner_hz : float
+        Corner of the star-tracker low-frequency noise candidate [Hz].
+
+    Returns
+    -------
+    candidates : list of Candidate
+        Deterministic variants.
+    noise : NoiseCandidate or None
+        The star-tracker noise candidate, if chosen.
+    """
+    chosen = list(FAMILIES) if families is None else list(families)
+    unknown = [name for name in chosen if name not in FAMILIES]
+    if unknown:
+        raise ValueError(f"unknown candidate effect(s) {unknown}; known: {', '.join(FAMILIES)}")
+    out: list[Candidate] = []
+    for family in chosen:
+        if family == "scale_factor_drift":
+            out += [_scale_factor_drift(g, p) for g in range(2) for p in "xyz"]
+        elif family == "cross_coupling":
+            out += [_misalignment(g, a) for g in range(2) for a in range(3)]
+            out += [_imbalance(g, p) for g in range(2) for p in "xyz"]
+        elif family == "time_offset":
+            out.append(_time_offset())
+        elif family == "thruster_torque_gain":
+            out += [_torque_gain(a) for a in range(3)]
+        elif family == "com_drift":
+            out += [_com_drift(w, a) for w in (0, 1, 2) for a in range(3)]
+        elif family == "readout_nonlinearity":
+            out += [_nonlinearity(g, r) for g in range(2) for r in ANGULAR_READOUTS + LINEAR_READOUTS]
+        elif family == "inertia_error":
+            out += [_inertia_diagonal(a) for a in range(3)]
+            out += [_inertia_product(a, b) for a, b in ((0, 1), (0, 2), (1, 2))]
+        elif family == "gravity_gradient":
+            out += [_gravity_gradient(a, orbit_period_s) for a in range(3)]
+        elif family == "tm_stiffness":
+            out += [_tm_stiffness(g, a, suspension_hz, damping) for g in range(2) for a in range(3)]
+        elif family == "thruster_force_leakage":
+            out += [_force_leakage(c, k) for c in range(3) for k in range(3)]
+    noise = NoiseCandidate(corner_hz=st_corner_hz) if "star_tracker_lowfreq_noise" in chosen else None
+    return out, noise

@@ -1,0 +1,393 @@
+"""Residual channels: data minus the calibrated nominal model, with exactly known noise.
+
+Fifteen channels (CRF axes x, y, z each), all linear in the calibrated parameters and in the
+noise sources, built from the raw arrays only:
+
+=================  ==============================================================================
+``st``             star tracker vs GRS: ``(inc_j - inc_{j-1}) / dt^2 - (m_j + m_{j-1}) / 2``, the
+                   second difference of the star-tracker attitude (body increments
+                   ``inc_j = log(q_{j-1}^* q_j)``) minus the same combination of the calibrated
+                   GRS angular acceleration m (mean of both GRS, CRF). Zero for the nominal
+                   model (the integrating GRS sample and the midpoint attitude step make it exact);
+                   the attitude and rate constants of the integration drop out.
+``torque``         GRS vs command: ``m - J^-1 (tau_cmd - w x J w)``.
+``ang_diff``       GRS1 vs GRS2 angular, CRF: ``g_1 - g_2``.
+``lin_common``     mean linear acceleration minus the modelled coupling: ``(l_1 + l_2)/2 - A~ d_mean``,
+                   prewhitened by ``1 - phi z`` (phi the SRP AR(1) coefficient).
+``lin_diff``       linear difference, the common spacecraft acceleration cancels:
+                   ``l_1 - l_2 - A~ (d_1 - d_2)``.
+=================  ==============================================================================
+
+``A~ d = m x d + w x (w x d)`` uses the calibrated GRS angular acceleration m and the midpoint
+rate w (cumulative sum of m, initial rate fitted to the star tracker). The first samples of the
+channels with memory (two of ``st``, one of ``lin_common``) are set to zero; the fit frees them
+(impulse columns), which makes the circular (FFT) noise model exact (:mod:`.spectral`).
+
+Effects and nuisance parameters enter as *perturbations* of the data-side quantities (angular
+and linear accelerations of each GRS, star-tracker attitude, torque prediction, spacecraft
+acceleration), mapped to the channels by :func:`perturbation_channels`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from taiji2_sim_pkg.core.frames import cross, quat_conjugate, quat_multiply, rotvec_from_quat
+
+from .inputs import DiagnosisInput
+from .model import ANGULAR_TO_LINEAR, NominalModel
+
+__all__ = [
+    "CHANNELS",
+    "GROUPS",
+    "N_CHANNELS",
+    "Linearization",
+    "Readouts",
+    "linearize",
+    "nuisance_column",
+    "nuisance_names",
+    "perturbation_channels",
+    "readouts_from_input",
+]
+
+GROUPS = ("st", "torque", "ang_diff", "lin_common", "lin_diff")
+CHANNELS = tuple(f"{group}_{axis}" for group in GROUPS for axis in "xyz")
+N_CHANNELS = len(CHANNELS)
+ST, TORQUE, ANG_DIFF, LIN_COMMON, LIN_DIFF = (slice(3 * i, 3 * i + 3) for i in range(5))
+WRAP_SAMPLES = {"st": 2, "lin_common": 1}
+"""Leading samples of the channels with memory that the fit frees (impulse columns)."""
+
+
+@dataclass(frozen=True)
+class Readouts:
+    """Raw-data quantities that do not depend on the calibration.
+
+    Attributes
+    ----------
+    t_s : numpy.ndarray
+        (n,) sample times [s].
+    u : numpy.ndarray
+        (n, 2, 3) angular voltage differences (vy1-vy2, vz1-vz2, vx1-vx2) per GRS [V].
+    s : numpy.ndarray
+        (n, 2, 3) linear voltage sums (vx1+vx2, vy1+vy2, vz1+vz2) per GRS [V].
+    inc : numpy.ndarray
+        (n, 3) star-tracker body increments ``log(q_{j-1}^* q_j)`` (row 0 zero) [rad].
+    dinc : numpy.ndarray
+        (n, 3) ``(inc_j - inc_{j-1}) / dt^2`` (rows 0, 1 zero) [rad s^-2].
+    torque_cmd_n_m : numpy.ndarray
+        (n, 3) commanded torque [N m].
+    dt_s : float
+        Sample interval [s].
+    """
+
+    t_s: np.ndarray
+    u: np.ndarray
+    s: np.ndarray
+    inc: np.ndarray
+    dinc: np.ndarray
+    torque_cmd_n_m: np.ndarray
+    dt_s: float
+
+    @property
+    def n(self) -> int:
+        """Number of samples."""
+        return int(self.t_s.shape[0])
+
+
+def readouts_from_input(inp: DiagnosisInput) -> Readouts:
+    """Voltage combinations and star-tracker increments of an input."""
+    volts = inp.voltages_v
+    first, second = volts[..., 0::2], volts[..., 1::2]
+    u = (first - second)[..., [1, 2, 0]]  # (phi: y pair, theta: z pair, psi: x pair)
+    s = first + second
+    q = inp.st_quat_xyzw
+    inc = np.zeros((inp.n, 3))
+    if inp.n > 1:
+        inc[1:] = rotvec_from_quat(quat_multiply(quat_conjugate(q[:-1]), q[1:]))
+    dinc = np.zeros((inp.n, 3))
+    if inp.n > 2:
+        dinc[2:] = (inc[2:] - inc[1:-1]) / inp.dt_s ** 2
+    return Readouts(inp.t_s, u, s, inc, dinc, inp.torque_cmd_n_m, inp.dt_s)
+
+
+@dataclass(frozen=True)
+class Linearization:
+    """Calibrated accelerations and channels at one point (G, d) of the nominal model.
+
+    Attributes
+    ----------
+    g_angular : numpy.ndarray
+        (2, 3) angular scale factors used [rad s^-2 V^-1] (linear ones: r times, tied).
+    com_offset_m : numpy.ndarray
+        (2, 3) d_i used, CRF [m].
+    ghat : numpy.ndarray
+        (n, 2, 3) angular accelerations per GRS, TMRF (phi, theta, psi) [rad s^-2].
+    lhat : numpy.ndarray
+        (n, 2, 3) linear accelerations per GRS, TMRF [m s^-2].
+    g_crf, l_crf : numpy.ndarray
+        (n, 2, 3) the same in CRF.
+    m : numpy.ndarray
+        (n, 3) mean GRS angular acceleration, CRF [rad s^-2].
+    omega : numpy.ndarray
+        (n, 3) body rate at the sample times [rad/s] (cumulative GRS angular acceleration plus an
+        initial rate and a rate drift fitted to the star tracker).
+    w_mid : numpy.ndarray
+        (n, 3) midpoint rate of each step [rad/s].
+    channels : numpy.ndarray
+        (n, 15) residual channels (:data:`CHANNELS`).
+    acc_pred : numpy.ndarray
+        (n, 3) angular acceleration predicted from the commanded torque, ``J^-1 (tau - w x J w)``,
+        CRF [rad s^-2]: the noise-free regressor.
+    ghat_pred : numpy.ndarray
+        (n, 2, 3) its TMRF components per GRS [rad s^-2].
+    lhat_pred : numpy.ndarray
+        (n, 2, 3) predicted linear acceleration ``C_i A~(acc_pred, w) d_i`` (no spacecraft
+        acceleration: that is noise), TMRF [m s^-2].
+
+    Notes
+    -----
+    Columns of parameters that scale the data (scale factors, and effects built on measured
+    accelerations) use the predicted, noise-free accelerations: built on the measured ones, they
+    would contain the very noise of the channel they explain, and the least-squares estimate would
+    shrink that noise (an errors-in-variables bias of the noise-to-signal power ratio, 0.2 % for
+    the scale factors).
+    """
+
+    g_angular: np.ndarray
+    com_offset_m: np.ndarray
+    ghat: np.ndarray
+    lhat: np.ndarray
+    g_crf: np.ndarray
+    l_crf: np.ndarray
+    m: np.ndarray
+    omega: np.ndarray
+    w_mid: np.ndarray
+    channels: np.ndarray
+    acc_pred: np.ndarray
+    ghat_pred: np.ndarray
+    lhat_pred: np.ndarray
+
+    @property
+    def d_mean(self) -> np.ndarray:
+        """(d_1 + d_2) / 2 [m]."""
+        return 0.5 * (self.com_offset_m[0] + self.com_offset_m[1])
+
+    @property
+    def d_diff(self) -> np.ndarray:
+        """d_1 - d_2 [m]."""
+        return self.com_offset_m[0] - self.com_offset_m[1]
+
+
+def _to_crf(model: NominalModel, tmrf: np.ndarray) -> np.ndarray:
+    """(n, 2, 3) TMRF_i -> CRF per GRS."""
+    return np.einsum("gij,ngj->ngi", model.p_crf, tmrf)
+
+
+def _coupling(m: np.ndarray, w: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """A~ d = m x d + w x (w x d) for (n, 3) m, w and a (3,) or (n, 3) d."""
+    return cross(m, d) + cross(w, cross(w, d))
+
+
+def _prewhiten_common(x: np.ndarray, decay: float) -> np.ndarray:
+    """``x_j - phi x_{j-1}`` (row 0 left for the wrap)."""
+    out = np.array(x, dtype=np.float64)
+    out[1:] = x[1:] - decay * x[:-1]
+    return out
+
+
+def linearize(readouts: Readouts, model: NominalModel, g_angular: np.ndarray,
+              com_offset_m: np.ndarray) -> Linearization:
+    """Calibrated accelerations and residual channels at (G, d).
+
+    Parameters
+    ----------
+    readouts : Readouts
+        Raw-data quantities.
+    model : NominalModel
+        Nominal model.
+    g_angular : numpy.ndarray
+        (2, 3) angular scale factors [rad s^-2 V^-1].
+    com_offset_m : numpy.ndarray
+        (2, 3) c.m. offsets, CRF [m].
+
+    Returns
+    -------
+    Linearization
+    """
+    g_angular = np.asarray(g_angular, dtype=np.float64)
+    d = np.asarray(com_offset_m, dtype=np.float64)
+    dt = readouts.dt_s
+    n = readouts.n
+    ghat = readouts.u * g_angular
+    lhat = readouts.s * model.g_linear(g_angular)
+    g_crf = _to_crf(model, ghat)
+    l_crf = _to_crf(model, lhat)
+    m = 0.5 * (g_crf[:, 0] + g_crf[:, 1])
+    # rate: cumulative sum of m, plus an initial rate and a rate drift fitted to the star-tracker
+    # increments. The drift absorbs a GRS angular bias (a constant in m integrates to a ramp of the
+    # rate, 3e-6 rad/s over 3 h for 3e-10 rad s^-2, ten times the maneuver rate), which would
+    # otherwise corrupt the centripetal and gyroscopic terms.
+    integrated = dt * np.cumsum(m, axis=0)
+    previous = np.vstack((np.zeros((1, 3)), integrated[:-1]))
+    mid_integrated = 0.5 * (previous + integrated)
+    t_mid_steps = (np.arange(n) - 0.5) * dt  # midpoint of each step from the first sample
+    if n > 2:
+        # inc_j / dt = w_mid_j = c0 + c1 t_j + mid_integrated_j  (j >= 1)
+        design = np.column_stack((np.ones(n - 1), t_mid_steps[1:]))
+        coefficients, *_ = np.linalg.lstsq(design, readouts.inc[1:] / dt - mid_integrated[1:], rcond=None)
+    else:
+        coefficients = np.zeros((2, 3))
+    w_mid = coefficients[0] + np.outer(t_mid_steps, coefficients[1]) + mid_integrated
+    omega = coefficients[0] + np.outer(t_mid_steps + 0.5 * dt, coefficients[1]) + integrated
+    channels = np.zeros((n, 15))
+    channels[:, ST] = readouts.dinc
+    channels[1:, ST] -= 0.5 * (m[1:] + m[:-1])
+    inertia = model.inertia_kg_m2
+    predicted = (readouts.torque_cmd_n_m - cross(w_mid, w_mid @ inertia.T)) @ model.inertia_inv.T
+    channels[:, TORQUE] = m - predicted
+    channels[:, ANG_DIFF] = g_crf[:, 0] - g_crf[:, 1]
+    d_mean = 0.5 * (d[0] + d[1])
+    d_diff = d[0] - d[1]
+    common = 0.5 * (l_crf[:, 0] + l_crf[:, 1]) - _coupling(m, w_mid, d_mean)
+    channels[:, LIN_COMMON] = _prewhiten_common(common, model.srp_decay)
+    channels[:, LIN_DIFF] = l_crf[:, 0] - l_crf[:, 1] - _coupling(m, w_mid, d_diff)
+    _zero_wrap(channels)
+    ghat_pred = np.einsum("gij,nj->ngi", model.c_tmrf, predicted)
+    lhat_pred = np.stack([_coupling(predicted, w_mid, d[g]) @ model.c_tmrf[g].T for g in range(2)], axis=1)
+    return Linearization(g_angular, d, ghat, lhat, g_crf, l_crf, m, omega, w_mid, channels, predicted,
+                         ghat_pred, lhat_pred)
+
+
+def _zero_wrap(channels: np.ndarray) -> None:
+    channels[: WRAP_SAMPLES["st"], ST] = 0.0
+    channels[: WRAP_SAMPLES["lin_common"], LIN_COMMON] = 0.0
+
+
+def perturbation_channels(lin: Linearization, model: NominalModel, dg: np.ndarray | None = None,
+                          dl: np.ndarray | None = None, datt: np.ndarray | None = None,
+                          dtorque: np.ndarray | None = None, dacc: np.ndarray | None = None) -> np.ndarray:
+    """Change of the 15 channels caused by changes of the data-side quantities (first order).
+
+    Parameters
+    ----------
+    lin : Linearization
+        Linearization point (uses its d and rate).
+    model : NominalModel
+        Nominal model (dt, SRP prewhitening).
+    dg : numpy.ndarray, optional
+        (n, 2, 3) change of the calibrated angular acceleration of each GRS, CRF [rad s^-2].
+    dl : numpy.ndarray, optional
+        (n, 2, 3) change of the calibrated linear acceleration of each GRS, CRF [m s^-2].
+    datt : numpy.ndarray, optional
+        (n, 3) change of the star-tracker attitude (small angle, body) [rad].
+    dtorque : numpy.ndarray, optional
+        (n, 3) change of the torque channel itself (true angular acceleration not predicted by the
+        commanded torque) [rad s^-2].
+    dacc : numpy.ndarray, optional
+        (n, 3) spacecraft acceleration not in the nominal model (common to both GRS), CRF [m s^-2].
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, 15) channel change (wrap samples zero).
+    """
+    n = lin.m.shape[0]
+    out = np.zeros((n, 15))
+    common = None
+    diff = None
+    if dg is not None:
+        dm = 0.5 * (dg[:, 0] + dg[:, 1])
+        out[1:, ST] -= 0.5 * (dm[1:] + dm[:-1])
+        out[:, TORQUE] += dm
+        out[:, ANG_DIFF] += dg[:, 0] - dg[:, 1]
+        common = -cross(dm, lin.d_mean)
+        diff = -cross(dm, lin.d_diff)
+    if dl is not None:
+        extra_common = 0.5 * (dl[:, 0] + dl[:, 1])
+        common = extra_common if common is None else common + extra_common
+        extra_diff = dl[:, 0] - dl[:, 1]
+        diff = extra_diff if diff is None else diff + extra_diff
+    if dacc is not None:
+        common = dacc if common is None else common + dacc
+    if datt is not None:
+        dt2 = model.dt_s ** 2
+        out[2:, ST] += (datt[2:] - 2.0 * datt[1:-1] + datt[:-2]) / dt2
+    if dtorque is not None:
+        out[:, TORQUE] += dtorque
+    if common is not None:
+        out[:, LIN_COMMON] = _prewhiten_common(common, model.srp_decay)
+    if diff is not None:
+        out[:, LIN_DIFF] = diff
+    _zero_wrap(out)
+    return out
+
+
+def nuisance_names() -> list[str]:
+    """Names of the nuisance columns (see :func:`nuisance_column`)."""
+    names = [f"G.{grs}.{axis}" for grs in (1, 2) for axis in ("phi", "theta", "psi")]
+    names += [f"d.{grs}.{axis}" for grs in (1, 2) for axis in "xyz"]
+    names += [f"trend.{channel}" for channel in CHANNELS]
+    for group, count in WRAP_SAMPLES.items():
+        start = GROUPS.index(group) * 3
+        names += [f"wrap.{CHANNELS[start + axis]}.{j}" for axis in range(3) for j in range(count)]
+    return names
+
+
+def nuisance_column(lin: Linearization, model: NominalModel, name: str) -> np.ndarray:
+    """One column of the calibration parameters of the nominal model or of a nuisance term.
+
+    - ``G.<grs>.<phi|theta|psi>``: relative change of an angular scale factor (the linear one of
+      the same electrode pair follows: the tied conversion); coefficient = relative update.
+    - ``d.<grs>.<x|y|z>``: change of d_i [m]; coefficient = update.
+    - ``trend.<channel>``: linear trend of a channel (GRS bias drift; the constant is the dropped
+      DC bin).
+    - ``wrap.<channel>.<j>``: impulse at a leading sample of a channel with memory.
+
+    Parameters
+    ----------
+    lin : Linearization
+        Linearization point.
+    model : NominalModel
+        Nominal model.
+    name : str
+        A name of :func:`nuisance_names`.
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, 15); sign such that the fitted coefficient is the parameter update.
+    """
+    kind, *rest = name.split(".")
+    n = lin.m.shape[0]
+    column = np.zeros((n, 15))
+    if kind == "G":
+        grs = int(rest[0]) - 1
+        axis = ("phi", "theta", "psi").index(rest[1])
+        p_crf = model.p_crf
+        dg = np.zeros((n, 2, 3))
+        dl = np.zeros((n, 2, 3))
+        dg[:, grs] = np.outer(lin.ghat_pred[:, grs, axis], p_crf[grs][:, axis])
+        linear = ANGULAR_TO_LINEAR[axis]
+        dl[:, grs] = np.outer(lin.lhat_pred[:, grs, linear], p_crf[grs][:, linear])
+        # scaling G by (1 + x) raises the data side by x * P: the fit of y ~ -x P returns x
+        return -perturbation_channels(lin, model, dg=dg, dl=dl)
+    if kind == "d":
+        grs = int(rest[0]) - 1
+        unit = np.zeros(3)
+        unit["xyz".index(rest[1])] = 1.0
+        coupling = _coupling(lin.acc_pred, lin.w_mid, unit)
+        column[:, LIN_COMMON] = _prewhiten_common(0.5 * coupling, model.srp_decay)
+        column[:, LIN_DIFF] = coupling if grs == 0 else -coupling
+        _zero_wrap(column)
+        return column
+    if kind == "trend":
+        index = CHANNELS.index(rest[0])
+        column[:, index] = (np.arange(n) - 0.5 * (n - 1)) / max(n, 1)
+        _zero_wrap(column)
+        return column
+    if kind == "wrap":
+        column[int(rest[1]), CHANNELS.index(rest[0])] = 1.0
+        return column
+    raise ValueError(f"unknown nuisance column {name!r}")

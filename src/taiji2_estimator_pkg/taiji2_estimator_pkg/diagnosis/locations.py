@@ -1,0 +1,227 @@
+"""Where the gap lies: residual power against the nominal noise, per channel, band and segment.
+
+For a channel c the normalised periodogram ``p_k = |Y_c(k)|^2 / S_cc(k)`` of the residual is,
+under the nominal model, a sequence of independent unit exponentials (the channel spectra of
+:mod:`.spectral` are exact); so is that of the channel's *innovation* given the other channels
+(``view = "conditional"``, :meth:`.spectral.NoiseSpectrum.normalised`), which is far more
+sensitive where channels share a noise. A *location* is a view, a channel, a frequency band, a bin
+kind (the bins within one bin of a maneuver harmonic, or the continuum between them) and a time
+segment:
+
+- whole run: gap ``R = mean_k p_k`` over the K bins; ``K R ~ Gamma(K, 1)``;
+- segment (a third of the run): the band-limited whitened series ``x_t`` (inverse DFT of
+  ``Y_c / sqrt(S_cc)`` on the band) has the power ``R = mean_t x_t^2 / E[x^2]`` on the segment,
+  approximately ``chi^2_nu / nu`` with ``nu = 2 K L / n`` degrees of freedom (L samples).
+
+Significance = ``-log10 p`` of the upper tail (power excess). A location is significant when its
+p-value is below ``alpha / (number of tested locations)`` (Bonferroni).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import gammaincc
+
+from .channels import CHANNELS
+
+__all__ = ["Location", "LocationGrid", "log10_tail", "scan_locations"]
+
+_MIN_DOF = 4.0  # fewest degrees of freedom of a tested location (a Gamma tail is meaningless below)
+
+
+def log10_tail(shape: np.ndarray | float, value: np.ndarray | float) -> np.ndarray:
+    """``-log10 P(Gamma(shape, 1) >= value)``, robust far in the tail.
+
+    Parameters
+    ----------
+    shape : array_like
+        Gamma shape (number of complex bins, or half the chi-square degrees of freedom).
+    value : array_like
+        Observed sum of unit-mean exponentials.
+
+    Returns
+    -------
+    numpy.ndarray
+        Significance, >= 0.
+    """
+    a = np.asarray(shape, dtype=np.float64)
+    x = np.asarray(value, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = gammaincc(a, x)
+        direct = -np.log10(np.where(p > 0, p, 1.0))
+        # far tail: log Q(a, x) ~ (a - 1) log x - x - lgamma(a) + log(1 + (a-1)/x + ...)
+        from scipy.special import gammaln
+
+        asymptotic = -((a - 1.0) * np.log(np.maximum(x, 1e-300)) - x - gammaln(a)
+                       + np.log1p(np.maximum(a - 1.0, 0.0) / np.maximum(x, 1e-300))) / np.log(10.0)
+    return np.where(p > 1e-280, np.maximum(direct, 0.0), np.maximum(asymptotic, 0.0))
+
+
+@dataclass(frozen=True)
+class Location:
+    """One tested location.
+
+    Attributes
+    ----------
+    channel : str
+        Channel name (:data:`.channels.CHANNELS`).
+    view : str
+        ``"marginal"`` (the channel against its own nominal spectrum) or ``"conditional"`` (its
+        innovation given the other channels).
+    band_hz : tuple of float
+        [lo, hi) [Hz].
+    kind : str
+        ``"harmonics"`` (bins within one bin of a maneuver harmonic) or ``"continuum"``.
+    segment_s : tuple of float
+        [t0, t1] of the time segment [s].
+    segment : str
+        ``"all"``, ``"early"``, ``"middle"``, ``"late"``.
+    gap : float
+        Residual power / nominal power (1 under the nominal model).
+    dof : float
+        Degrees of freedom of the test (2 per complex bin).
+    significance : float
+        ``-log10 p`` of the excess.
+    significant : bool
+        Below the Bonferroni-corrected level.
+    """
+
+    channel: str
+    view: str
+    band_hz: tuple[float, float]
+    kind: str
+    segment_s: tuple[float, float]
+    segment: str
+    gap: float
+    dof: float
+    significance: float
+    significant: bool = False
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON form."""
+        return {"channel": self.channel, "view": self.view,
+                "band_hz": [float(self.band_hz[0]), float(self.band_hz[1])],
+                "kind": self.kind, "segment": self.segment,
+                "segment_s": [float(self.segment_s[0]), float(self.segment_s[1])],
+                "gap": float(self.gap), "dof": float(self.dof), "significance": float(self.significance),
+                "significant": bool(self.significant)}
+
+
+@dataclass(frozen=True)
+class LocationGrid:
+    """Bands and bin kinds of a record.
+
+    Parameters
+    ----------
+    n : int
+        Record length.
+    sample_rate_hz : float
+        fs [Hz].
+    band_edges_hz : sequence of float
+        Band edges [Hz]; the first band starts at the first bin, the last ends below Nyquist.
+    maneuver_period_s : float
+        Square-wave period [s] (harmonics at h / P).
+    harmonic_halfwidth : int
+        Bins on either side of a harmonic that count as "harmonics".
+    """
+
+    n: int
+    sample_rate_hz: float
+    band_edges_hz: tuple[float, ...]
+    maneuver_period_s: float
+    harmonic_halfwidth: int = 1
+
+    @property
+    def frequencies_hz(self) -> np.ndarray:
+        """Frequencies of the bins 1 .. (n-1)//2 [Hz]."""
+        return np.arange(1, (self.n - 1) // 2 + 1) * self.sample_rate_hz / self.n
+
+    def harmonic_mask(self) -> np.ndarray:
+        """(K,) True on bins within ``harmonic_halfwidth`` of a maneuver harmonic."""
+        bins = np.arange(1, (self.n - 1) // 2 + 1)
+        spacing = self.n / (self.sample_rate_hz * self.maneuver_period_s)  # bins per harmonic
+        if not np.isfinite(spacing) or spacing <= 0:
+            return np.zeros(bins.shape, dtype=bool)
+        nearest = np.maximum(np.rint(bins / spacing), 1.0) * spacing
+        return np.abs(bins - nearest) <= self.harmonic_halfwidth + 0.5
+
+    def cells(self) -> list[tuple[tuple[float, float], str, np.ndarray]]:
+        """(band, kind, bin mask) of every band and kind with enough bins."""
+        freq = self.frequencies_hz
+        harmonic = self.harmonic_mask()
+        edges = list(self.band_edges_hz)
+        out = []
+        for lo, hi in itertools.pairwise(edges):
+            in_band = (freq >= lo) & (freq < hi)
+            for kind, mask in (("harmonics", in_band & harmonic), ("continuum", in_band & ~harmonic)):
+                if 2.0 * np.count_nonzero(mask) >= _MIN_DOF:
+                    out.append(((lo, hi), kind, mask))
+        return out
+
+
+def scan_locations(views: dict[str, np.ndarray], grid: LocationGrid, t_s: np.ndarray, segments: int = 3,
+                   alpha: float = 0.01, channels: Sequence[int] | None = None) -> tuple[list[Location], int, float]:
+    """Test every location of a residual.
+
+    Parameters
+    ----------
+    views : dict of str to numpy.ndarray
+        ``{"marginal": ..., "conditional": ...}``: (K, 15) residual DFTs normalised to unit variance
+        under the nominal model (bins 1..K = (n-1)//2).
+    grid : LocationGrid
+        Bands and kinds.
+    t_s : numpy.ndarray
+        (n,) sample times [s] (segment bounds).
+    segments : int
+        Number of equal time segments tested besides the whole run (0: whole run only).
+    alpha : float
+        Family-wise level of the Bonferroni threshold.
+    channels : sequence of int, optional
+        Channels to scan (default all).
+
+    Returns
+    -------
+    locations : list of Location
+        Sorted by decreasing significance.
+    n_tests : int
+        Number of tested locations.
+    threshold : float
+        Significance threshold ``-log10(alpha / n_tests)``.
+    """
+    n = grid.n
+    names = ("early", "middle", "late") if segments == 3 else tuple(f"part{i + 1}" for i in range(segments))
+    bounds = np.linspace(0, n, segments + 1).astype(int) if segments else np.array([0, n])
+    chosen = range(len(CHANNELS)) if channels is None else channels
+    records = []
+    cells = grid.cells()
+    for view, normalised_all in views.items():
+        power = np.abs(normalised_all) ** 2
+        for c in chosen:
+            for band, kind, mask in cells:
+                count = int(np.count_nonzero(mask))
+                ratio = float(np.mean(power[mask, c]))
+                records.append((CHANNELS[c], view, band, kind, (float(t_s[0]), float(t_s[-1])), "all", ratio,
+                                2.0 * count, float(log10_tail(count, count * ratio))))
+                if not segments:
+                    continue
+                spectrum = np.zeros(n // 2 + 1, dtype=np.complex128)
+                spectrum[1:1 + mask.shape[0]][mask] = normalised_all[mask, c]
+                series = np.fft.irfft(spectrum, n=n) * np.sqrt(n)
+                expected = 2.0 * count / n  # E[x_t^2] for unit-variance complex bins
+                for name, start, stop in zip(names, bounds[:-1], bounds[1:], strict=True):
+                    dof = 2.0 * count * (stop - start) / n
+                    if dof < _MIN_DOF:
+                        continue
+                    ratio_seg = float(np.mean(series[start:stop] ** 2) / expected)
+                    records.append((CHANNELS[c], view, band, kind, (float(t_s[start]), float(t_s[stop - 1])), name,
+                                    ratio_seg, dof, float(log10_tail(0.5 * dof, 0.5 * dof * ratio_seg))))
+    n_tests = len(records)
+    threshold = float(-np.log10(alpha / max(n_tests, 1)))
+    locations = [Location(ch, view, band, kind, seg, name, gap, dof, sig, sig >= threshold)
+                 for ch, view, band, kind, seg, name, gap, dof, sig in records]
+    locations.sort(key=lambda loc: -loc.significance)
+    return locations, n_tests, threshold

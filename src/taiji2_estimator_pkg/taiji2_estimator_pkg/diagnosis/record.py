@@ -1,0 +1,398 @@
+"""One record (the whole run, or its training or held-out part): channels, spectra, normal equations.
+
+Also the calibration of the nominal model (Gauss-Newton on the nuisance columns only).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from .candidates import Candidate, CandidateContext
+from .channels import Linearization, linearize, nuisance_column, nuisance_names, readouts_from_input
+from .inputs import DiagnosisInput
+from .model import NominalModel
+from .spectral import Design, NoiseSpectrum, Whitener, dft
+
+__all__ = ["Record", "RecordSettings", "calibrate", "column_fft"]
+
+
+class RecordSettings:
+    """The options a record needs (a subset of :class:`.engine.DiagnosisOptions`).
+
+    Parameters
+    ----------
+    f_max_hz : float
+        Highest frequency of the fits [Hz].
+    orbit_period_s, suspension_hz, damping, st_corner_hz : float
+        Candidate settings.
+    """
+
+    def __init__(self, f_max_hz: float, orbit_period_s: float, suspension_hz: float, damping: float,
+                 st_corner_hz: float) -> None:
+        self.f_max_hz = f_max_hz
+        self.orbit_period_s = orbit_period_s
+        self.suspension_hz = suspension_hz
+        self.damping = damping
+        self.st_corner_hz = st_corner_hz
+
+
+def column_fft(column: np.ndarray, k_max: int) -> np.ndarray:
+    """DFT (bins 1..k_max) of an (n, 15) column, transforming only its non-zero channels."""
+    out = np.zeros((k_max, column.shape[1]), dtype=np.complex128)
+    used = np.flatnonzero(np.any(column != 0.0, axis=0))
+    if used.size:
+        out[:, used] = dft(column[:, used], k_max)
+    return out
+
+
+def _k_max(n: int, sample_rate_hz: float, f_max_hz: float) -> int:
+    return max(1, min(int(f_max_hz * n / sample_rate_hz), (n - 1) // 2))
+
+
+class Record:
+    """Channels, exact spectra, column DFTs and normal equations of one record.
+
+    Parameters
+    ----------
+    inp : DiagnosisInput
+        Data.
+    model : NominalModel
+        Nominal model.
+    g_angular, com_offset_m : numpy.ndarray
+        (2, 3) linearization point (calibrated G, d).
+    settings : RecordSettings
+        Fit band and candidate settings.
+    candidates : sequence of Candidate
+        Variants whose columns are built.
+    t_mid_s : float
+        Reference time of the drift signatures [s] (middle of the whole run).
+    """
+
+    def __init__(self, inp: DiagnosisInput, model: NominalModel, g_angular: np.ndarray, com_offset_m: np.ndarray,
+                 settings: RecordSettings, candidates: Sequence[Candidate], t_mid_s: float) -> None:
+        self.inp = inp
+        self.model = model
+        self.settings = settings
+        self.readouts = readouts_from_input(inp)
+        self.lin: Linearization = linearize(self.readouts, model, g_angular, com_offset_m)
+        self.n = inp.n
+        self.k_max = _k_max(self.n, model.sample_rate_hz, settings.f_max_hz)
+        self.bins = np.arange(1, self.k_max + 1)
+        self.spectrum = NoiseSpectrum(model, com_offset_m, self.n)
+        self.ctx = CandidateContext(self.lin, self.readouts, model, settings.orbit_period_s, settings.suspension_hz,
+                                    settings.damping, t_mid_s)
+        self.nuisance = nuisance_names()
+        self.ffts: dict[str, np.ndarray] = {}
+        for name in self.nuisance:
+            self.ffts[name] = column_fft(nuisance_column(self.lin, model, name), self.k_max)
+        self.candidates = {c.key: c for c in candidates}
+        for candidate in candidates:
+            for name, column in zip(candidate.column_names(), candidate.build(self.ctx), strict=True):
+                self.ffts[name] = column_fft(column, self.k_max)
+        self.names = list(self.ffts)
+        self.y_fft = dft(self.lin.channels, self.k_max)
+        self.st_template = self.spectrum.st_template(self.bins, settings.st_corner_hz)
+        self.kappa = 0.0
+        self.secant: dict[str, float] = {}
+        self.whitener: Whitener
+        self.design: Design
+        self.rebuild(0.0)
+
+    @property
+    def frequencies_hz(self) -> np.ndarray:
+        """Frequencies of the fit bins [Hz]."""
+        return self.bins * self.model.sample_rate_hz / self.n
+
+    def rebuild(self, kappa: float) -> None:
+        """Whiten with the extra star-tracker noise ``kappa`` (f_knee^2) and rebuild the normal equations.
+
+        Columns keep their current linearisation (see :meth:`relinearise`).
+        """
+        self.kappa = float(kappa)
+        extra = self.kappa * self.st_template if self.kappa > 0 else None
+        self.whitener = Whitener(self.spectrum, self.bins, extra)
+        self.design = Design.build(self.whitener, self.y_fft, self.names, [self.ffts[n] for n in self.names])
+
+    @property
+    def n_rows(self) -> int:
+        """Real rows of the least squares (2 K 15)."""
+        return self.design.n_rows
+
+    def indices(self, names: Sequence[str]) -> np.ndarray:
+        """Design indices of column names."""
+        return self.design.index(names)
+
+    def fit(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray, float]:
+        """(estimates, covariance, chi2) of a set of columns."""
+        return self.design.fit(self.indices(names))
+
+    def _ensure_series(self, candidate: Candidate) -> list[str]:
+        names = candidate.series_names()
+        missing = [name for name in names if name not in self.ffts]
+        if missing and candidate.series is not None:
+            ffts = [column_fft(column, self.k_max) for column in candidate.series(self.ctx)]
+            for name, fft in zip(names, ffts, strict=True):
+                self.ffts[name] = fft
+            self.names = [*self.names, *names]
+            self.design.append(self.whitener, names, ffts)
+        return names
+
+    def relinearise(self, candidate: Candidate, theta: np.ndarray) -> None:
+        """Replace a polynomial signature's column by its secant at ``theta``: theta x column = the
+        exact (series) channel change, so that a linear fit near theta is consistent."""
+        if candidate.series is None or candidate.coefficients is None:
+            return
+        value = float(np.ravel(theta)[0])
+        names = self._ensure_series(candidate)
+        weights = self._secant_weights(candidate, value)
+        (name,) = candidate.column_names()
+        self.ffts[name] = sum(w * self.ffts[n] for w, n in zip(weights, names, strict=True))
+        self.design.replace(self.whitener, name, self.ffts[name])
+        self.secant[candidate.key] = value
+
+    @staticmethod
+    def _secant_weights(candidate: Candidate, value: float) -> np.ndarray:
+        size = len(candidate.coefficients(1.0))
+        if value == 0.0:
+            return candidate.coefficients(1.0) * (np.arange(size) == 0)
+        return candidate.coefficients(value) / value
+
+    def series_fit(self, candidate: Candidate, others: Sequence[str]) -> tuple[float, float]:
+        """Magnitude and chi2 of a polynomial signature fitted by its exact series, ``others`` refitted.
+
+        With the other columns projected out, ``chi2(theta) = c - 2 v^T b + v^T M v`` with
+        ``v = coefficients(theta)``: a cheap polynomial, scanned densely over
+        ``|theta| <= bound`` and refined by golden section.
+        """
+        if candidate.series is None or candidate.coefficients is None:
+            raise ValueError(f"{candidate.key} has no series")
+        series = self._ensure_series(candidate)
+        design = self.design
+        free, fixed = self.indices(others), self.indices(series)
+        gram = design.gram
+        g_ff = gram[np.ix_(free, free)]
+        scale = np.sqrt(np.maximum(np.diag(g_ff), 1e-300))
+        rhs = np.column_stack((design.xty[free], gram[np.ix_(free, fixed)])) / scale[:, None]
+        solved = np.linalg.solve(g_ff / np.outer(scale, scale) + 1e-13 * np.eye(free.size), rhs) / scale[:, None]
+        chi2_others = design.yty - float(design.xty[free] @ solved[:, 0])
+        b = design.xty[fixed] - gram[np.ix_(free, fixed)].T @ solved[:, 0]
+        m = gram[np.ix_(fixed, fixed)] - gram[np.ix_(free, fixed)].T @ solved[:, 1:]
+        coefficients = candidate.coefficients
+
+        def objective(value: float) -> float:
+            v = coefficients(value)
+            return chi2_others - 2.0 * float(v @ b) + float(v @ m @ v)
+
+        limit = candidate.bound(self.ctx) if candidate.bound is not None else np.inf
+        linear = float(b[0] / m[0, 0]) if m[0, 0] > 0 else 0.0
+        sigma = 1.0 / math.sqrt(max(m[0, 0], 1e-300))
+        width = min(max(300.0 * sigma, 5.0 * abs(linear)), 2.0 * limit) if np.isfinite(limit) else \
+            max(300.0 * sigma, 5.0 * abs(linear))
+        ramp = np.linspace(-1.0, 1.0, 2001)
+        grid = linear + width * np.sign(ramp) * ramp ** 2
+        if np.isfinite(limit):
+            grid = grid[np.abs(grid) <= limit]
+            grid = np.append(grid, 0.0) if grid.size else np.array([0.0])
+        weights = np.stack([coefficients(v) for v in grid])
+        values = chi2_others - 2.0 * weights @ b + np.einsum("gi,ij,gj->g", weights, m, weights)
+        best = int(np.argmin(values))
+        lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
+        if hi > lo:
+            refined = minimize_scalar(objective, bounds=(min(lo, hi), max(lo, hi)), method="bounded")
+            value = float(refined.x)
+        else:
+            value = float(grid[best])
+        return value, objective(value)
+
+    def refine(self, candidate: Candidate, others: Sequence[str]) -> tuple[np.ndarray, np.ndarray, float]:
+        """Fit ``others`` + the candidate; a polynomial signature by its exact series (:meth:`series_fit`),
+        its column then becoming the secant at the fitted magnitude.
+
+        Returns the fit of ``others + candidate`` (estimates, covariance, chi2).
+        """
+        names = list(others) + candidate.column_names()
+        if candidate.series is None or candidate.coefficients is None:
+            return self.fit(names)
+        value, _ = self.series_fit(candidate, others)
+        self.relinearise(candidate, np.array([value]))
+        return self.fit(names)
+
+    def chi2(self, names: Sequence[str]) -> float:
+        """Residual chi-square of a set of columns (no covariance: cheaper)."""
+        return self.design.chi2(self.indices(names))
+
+    def residual_fft(self, names: Sequence[str], theta: np.ndarray) -> np.ndarray:
+        """(K, 15) residual after subtracting ``names`` times ``theta``."""
+        out = self.y_fft.copy()
+        for name, value in zip(names, theta, strict=True):
+            out -= value * self.ffts[name]
+        return out
+
+    def signature_fft(self, names: Sequence[str], theta: np.ndarray) -> np.ndarray:
+        """(K, 15) sum of columns times values."""
+        out = np.zeros_like(self.y_fft)
+        for name, value in zip(names, theta, strict=True):
+            out += value * self.ffts[name]
+        return out
+
+    def fit_with_fixed(self, free: Sequence[str], fixed: Sequence[str], theta_fixed: np.ndarray
+                       ) -> tuple[np.ndarray, float]:
+        """Free columns refitted after subtracting fixed ones: (estimates, chi2)."""
+        idx, o = self.indices(free), self.indices(fixed)
+        beta = self.design.solve_with_offset(idx, o, theta_fixed)
+        return beta, self.design.chi2_with_offset(idx, o, theta_fixed)
+
+    def projected_power(self, free: Sequence[str], fixed: Sequence[str], theta_fixed: np.ndarray) -> float:
+        """Whitened power of ``X_fixed theta`` after projecting out the free columns."""
+        idx, o = self.indices(free), self.indices(fixed)
+        gram = self.design.gram
+        theta = np.asarray(theta_fixed, dtype=np.float64)
+        cross_term = gram[np.ix_(idx, o)] @ theta
+        g_ff = gram[np.ix_(idx, idx)]
+        scale = np.sqrt(np.maximum(np.diag(g_ff), 1e-300))
+        solved = np.linalg.solve(g_ff / np.outer(scale, scale) + 1e-13 * np.eye(idx.size), cross_term / scale) / scale
+        return float(theta @ gram[np.ix_(o, o)] @ theta - cross_term @ solved)
+
+    # time domain --------------------------------------------------------------------------
+    def _candidate_columns(self, candidate: Candidate) -> list[np.ndarray]:
+        """Time-domain columns of a candidate at its current linearisation (the secant, if relinearised)."""
+        value = self.secant.get(candidate.key)
+        if value is None or candidate.series is None:
+            return candidate.build(self.ctx)
+        weights = self._secant_weights(candidate, value)
+        return [sum(w * c for w, c in zip(weights, candidate.series(self.ctx), strict=True))]
+
+    def time_column(self, name: str) -> np.ndarray:
+        """(n, 15) column by name (recomputed)."""
+        if name in self.nuisance:
+            return nuisance_column(self.lin, self.model, name)
+        key, _, param = name.rpartition(":")
+        candidate = self.candidates[key]
+        return self._candidate_columns(candidate)[candidate.params.index(param)]
+
+    def residual_time(self, names: Sequence[str], theta: np.ndarray) -> np.ndarray:
+        """(n, 15) residual channels after the fitted columns (all frequencies)."""
+        out = self.lin.channels.copy()
+        built: dict[str, list[np.ndarray]] = {}
+        for name, value in zip(names, theta, strict=True):
+            if value == 0.0:
+                continue
+            if name in self.nuisance:
+                out -= value * nuisance_column(self.lin, self.model, name)
+                continue
+            key, _, param = name.rpartition(":")
+            candidate = self.candidates[key]
+            if key not in built:
+                built[key] = self._candidate_columns(candidate)
+            out -= value * built[key][candidate.params.index(param)]
+        return out
+
+    def marginal(self, kappa: float | None = None) -> np.ndarray:
+        """(K, 15) per-channel spectrum at the fit bins with the star-tracker extra ``kappa``."""
+        out = self.whitener.marginal.copy()
+        kappa = self.kappa if kappa is None else kappa
+        if kappa != self.kappa:
+            out[:, 0:3] += (kappa - self.kappa) * self.st_template
+        return out
+
+    # star-tracker low-frequency noise ------------------------------------------------------
+    def _noise_terms(self, residual: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        whitener = self.whitener
+        w = whitener.apply(residual)
+        left = whitener.inverse[:, :, 0:3]  # L^-1 U in scaled coordinates
+        a = np.einsum("kri,krj->kij", left.conj(), left)  # U^T S^-1 U
+        v = np.einsum("kri,kr->ki", left.conj(), w)  # U^T S^-1 Y
+        template = self.st_template / whitener.scale[None, 0:3] ** 2
+        return a, v, template
+
+    @staticmethod
+    def _objective(a: np.ndarray, v: np.ndarray, template: np.ndarray, kappa: float) -> float:
+        """sum_k [log det(I + A K) - v^H K (I + A K)^-1 v]: change of -log L by the extra noise."""
+        k = kappa * template
+        m = np.eye(3) + a * k[:, None, :]
+        _, logdet = np.linalg.slogdet(m)
+        solved = np.linalg.solve(m, v[:, :, None])[:, :, 0]
+        quad = np.einsum("ki,ki->k", v.conj(), k * solved).real
+        return float(np.sum(logdet - quad))
+
+    @staticmethod
+    def _information(a: np.ndarray, template: np.ndarray, kappa: float) -> float:
+        """Fisher information of kappa (complex bins): sum_k tr((B T)^2), B = A (I + K A)^-1."""
+        k = kappa * template
+        m = np.eye(3) + k[:, :, None] * a  # I + K A
+        b = np.linalg.solve(m.transpose(0, 2, 1), a.transpose(0, 2, 1)).transpose(0, 2, 1)
+        bt = b * template[:, None, :]
+        return float(np.sum(np.einsum("kij,kji->k", bt, bt).real))
+
+    def noise_gain(self, residual: np.ndarray) -> tuple[float, float, float]:
+        """Fit the extra star-tracker noise to a residual (on top of the current whitening).
+
+        Returns
+        -------
+        kappa : float
+            f_knee^2 [Hz^2] (>= 0).
+        gain : float
+            ``2 delta log L`` (Whittle).
+        sigma : float
+            1-sigma of kappa (expected information at the estimate).
+        """
+        a, v, template = self._noise_terms(residual)
+        unit = 1.0 / math.sqrt(max(self._information(a, template, 0.0), 1e-300))
+        best = minimize_scalar(lambda x: self._objective(a, v, template, x * x * unit), bounds=(0.0, 60.0),
+                               method="bounded", options={"xatol": 1e-4})
+        kappa = float(best.x) ** 2 * unit
+        gain = -2.0 * self._objective(a, v, template, kappa)
+        if gain <= 0.0:
+            kappa, gain = 0.0, 0.0
+        sigma = 1.0 / math.sqrt(max(self._information(a, template, kappa), 1e-300))
+        return kappa, gain, sigma
+
+    def noise_gain_at(self, residual: np.ndarray, kappa: float) -> float:
+        """``2 delta log L`` of a fixed extra amplitude (held-out check)."""
+        a, v, template = self._noise_terms(residual)
+        return -2.0 * self._objective(a, v, template, kappa)
+
+
+def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings, iterations: int,
+              progress: Callable[[str], None]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Gauss-Newton calibration of G and d (with the trends and wrap impulses).
+
+    Returns
+    -------
+    g_angular : numpy.ndarray
+        (2, 3) calibrated angular scale factors [rad s^-2 V^-1].
+    com_offset_m : numpy.ndarray
+        (2, 3) calibrated d [m].
+    sigma_g_relative : numpy.ndarray
+        (2, 3) relative 1-sigma of G.
+    sigma_d_m : numpy.ndarray
+        (2, 3) 1-sigma of d [m].
+    """
+    g = model.g_angular.copy()
+    d = model.com_offset_m.copy()
+    readouts = readouts_from_input(inp)
+    n = inp.n
+    k_max = _k_max(n, model.sample_rate_hz, settings.f_max_hz)
+    bins = np.arange(1, k_max + 1)
+    names = nuisance_names()
+    sigma_g = np.full((2, 3), np.inf)
+    sigma_d = np.full((2, 3), np.inf)
+    for iteration in range(max(1, iterations)):
+        lin = linearize(readouts, model, g, d)
+        whitener = Whitener(NoiseSpectrum(model, d, n), bins)
+        design = Design.build(whitener, dft(lin.channels, k_max), names,
+                              [column_fft(nuisance_column(lin, model, name), k_max) for name in names])
+        theta, cov, _ = design.fit(np.arange(len(names)))
+        sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        sigma_g, sigma_d = sig[:6].reshape(2, 3), sig[6:12].reshape(2, 3)
+        g = g * (1.0 + theta[:6].reshape(2, 3))
+        d = d + theta[6:12].reshape(2, 3)
+        change = float(np.max(np.abs(theta[:12]) / np.where(sig[:12] > 0, sig[:12], 1.0)))
+        progress(f"calibration iteration {iteration + 1}: largest update {change:.3g} sigma")
+        if change < 0.05:
+            break
+    return g, d, sigma_g, sigma_d

@@ -1,0 +1,234 @@
+"""Report writer: ``report.md``, ``report.json`` and PNG plots (matplotlib Agg, no pyplot state).
+
+Plots:
+
+- ``psd_overlay.png``: per channel, the amplitude spectral density of the residual with the
+  nominal model (before) and with the accepted effects (after), against the nominal noise model
+  (log bands);
+- ``gap_map.png``: channel x band map of the location significance (-log10 p; largest over kinds
+  and segments), nominal model and final model side by side, the Bonferroni threshold marked.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .channels import CHANNELS
+from .engine import DiagnosisResult
+
+__all__ = ["write_report"]
+
+_UNITS = {"st": "rad s^-2", "torque": "rad s^-2", "ang_diff": "rad s^-2", "lin_common": "m s^-2 (prewhitened)",
+          "lin_diff": "m s^-2"}
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.floating | np.integer):
+        return value.item()
+    if isinstance(value, np.bool_):
+        return bool(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def _fmt(value: float | None, digits: int = 3) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    return f"{value:.{digits}g}"
+
+
+def _markdown(result: DiagnosisResult, files: list[str]) -> str:
+    lines = ["# Sim-to-real gap diagnosis", ""]
+    verdict = result.verdict
+    lines += [f"**Verdict: {verdict.get('summary', result.status)}**", ""]
+    inputs = result.inputs
+    lines += [f"- data: {inputs.get('samples', 0)} samples, {inputs.get('duration_s', 0.0) / 3600:.3f} h, "
+              f"{inputs.get('rejected_total', 0)} rejected {inputs.get('rejected', {})}",
+              f"- nominal model: layout `{result.model.get('layout', '?')}`"]
+    if result.status != "ok":
+        lines += [f"- status: **{result.status}**: {result.reason}", ""]
+        return "\n".join(lines) + "\n"
+    cal = result.calibration
+    lines += [f"- accepted effects: {', '.join(verdict.get('accepted_variants', [])) or 'none'}; "
+              f"unexplained: {verdict.get('unexplained')}",
+              f"- locations tested: {result.location_tests}, significance threshold {result.location_threshold:.2f} "
+              f"(-log10 p, Bonferroni 1 %); significant before {verdict.get('significant_locations_before')}, "
+              f"after {verdict.get('significant_locations_after')}",
+              f"- nominal-model chi2/dof = {cal['chi2'] / cal['dof']:.5f} (z = {cal['chi2_z']:.2f}), fit band "
+              f"<= {cal['f_max_hz']} Hz", ""]
+    lines += ["## Calibrated nominal model", "", "| GRS | G_phi | G_theta | G_psi | d_x [m] | d_y [m] | d_z [m] |",
+              "|---|---|---|---|---|---|---|"]
+    for grs in range(2):
+        g = cal["g_angular"][grs]
+        sg = cal["g_angular_sigma_relative"][grs]
+        d = cal["com_offset_m"][grs]
+        sd = cal["com_offset_sigma_m"][grs]
+        lines.append(f"| {grs + 1} | " + " | ".join(f"{g[i]:.6g} ({sg[i] * 1e6:.0f} ppm)" for i in range(3)) + " | "
+                     + " | ".join(f"{d[i]:.6g} ({sd[i] * 1e6:.0f} um)" for i in range(3)) + " |")
+    lines += ["", "## Where: locations of the gap (nominal model)", "",
+              "view: `marginal` = the channel against its own nominal spectrum, `conditional` = its innovation "
+              "given the other channels.", "",
+              "| channel | view | band [Hz] | kind | segment | gap (PSD ratio) | significance | significant |",
+              "|---|---|---|---|---|---|---|---|"]
+    for loc in result.locations[:15]:
+        lines.append(f"| {loc.channel} | {loc.view} | {loc.band_hz[0]:.3g}-{loc.band_hz[1]:.3g} | {loc.kind} | "
+                     f"{loc.segment} | {loc.gap:.3f} | {loc.significance:.2f} | {'yes' if loc.significant else ''} |")
+    lines += ["", "## Which: candidate effects", "",
+              "| effect | variant | magnitude | sigma | unit | delta chi2 | score (BIC) | accepted | shrink | "
+              "held-out shrink | held-out z | aliases |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for effect in result.effects:
+        lines.append(f"| {effect.name} | {effect.variant} | {_fmt(effect.magnitude, 4)} | {_fmt(effect.sigma, 2)} | "
+                     f"{effect.unit} | {effect.delta_chi2:.1f} | {effect.score:.1f} | "
+                     f"{'**yes**' if effect.accepted else ''} | {_fmt(effect.shrink, 2)} | "
+                     f"{_fmt(effect.shrink_heldout, 2)} | {_fmt(effect.heldout_z, 2)} | {', '.join(effect.aliases)} |")
+    lines += ["", "Forward selection:", ""]
+    for step in result.steps:
+        best = ", ".join(f"{t['candidate']} ({t['delta_chi2']}, {t['score']})" for t in step["top"][:3])
+        lines.append(f"- step {step['step']}: accepted **{step['accepted'] or 'none'}**; best (delta chi2, score): "
+                     f"{best}")
+    accepted = [e for e in result.effects if e.accepted]
+    if accepted:
+        lines += ["", "## How far", ""]
+        for effect in accepted:
+            lines += [f"### {effect.key}: {_fmt(effect.magnitude, 4)} +- {_fmt(effect.sigma, 2)} {effect.unit}", "",
+                      f"- shrink {_fmt(effect.shrink, 3)}; held out: trained magnitude "
+                      f"{_fmt(effect.magnitude_train, 4)} +- {_fmt(effect.sigma_train, 2)}, shrink "
+                      f"{_fmt(effect.shrink_heldout, 3)}, delta chi2 {_fmt(effect.heldout_delta_chi2, 3)} of "
+                      f"{_fmt(effect.heldout_delta_chi2_best, 3)} possible"]
+            if effect.aliases:
+                lines.append(f"- indistinguishable with these data from: {', '.join(effect.aliases)}")
+            if effect.g_shift:
+                rel = np.array(effect.g_shift["relative"]) * 1e6
+                dm = np.array(effect.d_shift["m"]) * 1e6 if effect.d_shift else np.zeros((2, 3))
+                lines.append(f"- calibration moves once it is modelled: G [ppm] GRS1 {np.round(rel[0], 1).tolist()}, "
+                             f"GRS2 {np.round(rel[1], 1).tolist()} (largest {effect.g_shift['max_abs_in_sigma']:.2f} "
+                             f"sigma); d [um] GRS1 {np.round(dm[0], 2).tolist()}, GRS2 {np.round(dm[1], 2).tolist()}"
+                             + (f" (largest {effect.d_shift['max_abs_in_sigma']:.2f} sigma)" if effect.d_shift else ""))
+            lines += ["", "| channel | band [Hz] | kind | gap before | gap after | fraction explained |",
+                      "|---|---|---|---|---|---|"]
+            for cell in effect.cells:
+                lines.append(f"| {cell['channel']} | {cell['band_hz'][0]:.3g}-{cell['band_hz'][1]:.3g} | "
+                             f"{cell['kind']} | {cell['gap_before']:.3f} | {cell['gap_after']:.3f} | "
+                             f"{_fmt(cell['fraction_explained'], 3)} |")
+            lines.append("")
+        if result.how_far:
+            lines += ["Gap at the top nominal locations (whole run) after each accepted effect:", "",
+                      "| channel | view | band [Hz] | kind | nominal | " + " | ".join(
+                          f"+ {a['effect']}" for a in result.how_far[0]["after"]) + " |",
+                      "|---|---|---|---|---|" + "---|" * len(result.how_far[0]["after"])]
+            for row in result.how_far:
+                lines.append(f"| {row['channel']} | {row['view']} | {row['band_hz'][0]:.3g}-{row['band_hz'][1]:.3g} | "
+                             f"{row['kind']} | {row['gap_nominal']:.3f} | "
+                             + " | ".join(f"{a['gap']:.3f}" for a in row["after"]) + " |")
+    remaining = result.verdict.get("remaining", [])
+    lines += ["", "## Remaining gap", ""]
+    if remaining:
+        lines += ["Locations significant in a fresh scan, or strong gaps of the nominal model still open "
+                  f"(stage 2, threshold {result.verdict.get('recheck_threshold', float('nan')):.2f}):", "",
+                  "| channel | view | band [Hz] | kind | segment | gap | significance |",
+                  "|---|---|---|---|---|---|---|"]
+        for loc in remaining[:10]:
+            lines.append(f"| {loc['channel']} | {loc['view']} | {loc['band_hz'][0]:.3g}-{loc['band_hz'][1]:.3g} | "
+                         f"{loc['kind']} | {loc['segment']} | {loc['gap']:.3f} | {loc['significance']:.2f} |")
+    else:
+        lines.append("No significant location remains.")
+    lines += ["", "## Files", ""] + [f"- `{name}`" for name in files]
+    lines += ["", f"Timing [s]: {result.timing_s}", ""]
+    return "\n".join(lines) + "\n"
+
+
+def _plots(result: DiagnosisResult, out: Path) -> list[str]:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    plots = result.plots
+    written = []
+    if not plots:
+        return written
+    freq = np.asarray(plots["frequency_hz"])
+    fs = float(plots["sample_rate_hz"])
+    to_asd = 2.0 / fs  # per-bin variance -> one-sided PSD
+    figure = Figure(figsize=(15, 16))
+    FigureCanvasAgg(figure)
+    axes = figure.subplots(5, 3)
+    for c, name in enumerate(CHANNELS):
+        ax = axes[c // 3][c % 3]
+        ax.loglog(freq, np.sqrt(plots["psd_before"][:, c] * to_asd), color="tab:red", lw=1.2, label="residual, nominal")
+        ax.loglog(freq, np.sqrt(plots["psd_after"][:, c] * to_asd), color="tab:blue", lw=1.2,
+                  label="residual, with effects")
+        ax.loglog(freq, np.sqrt(plots["psd_model"][:, c] * to_asd), color="k", lw=1.0, ls="--", label="nominal noise")
+        if not np.allclose(plots["psd_model_after"][:, c], plots["psd_model"][:, c]):
+            ax.loglog(freq, np.sqrt(plots["psd_model_after"][:, c] * to_asd), color="gray", lw=1.0, ls=":",
+                      label="noise with effects")
+        group = name.rsplit("_", 1)[0]
+        ax.set_title(f"{name} [{_UNITS[group]}/rtHz]", fontsize=9)
+        ax.grid(True, which="both", alpha=0.3)
+        if c == 0:
+            ax.legend(fontsize=7)
+        if c // 3 == 4:
+            ax.set_xlabel("frequency [Hz]")
+    figure.suptitle(f"Residual ASD vs nominal noise - {result.verdict.get('summary', '')}"[:150], fontsize=11)
+    figure.tight_layout(rect=(0, 0, 1, 0.97))
+    figure.savefig(out / "psd_overlay.png", dpi=90)
+    written.append("psd_overlay.png")
+
+    bands = plots["bands"]
+    labels = [f"{lo:.0e}-{hi:.0e}" for lo, hi in bands]
+    figure = Figure(figsize=(14, 7))
+    FigureCanvasAgg(figure)
+    axes = figure.subplots(1, 2)
+    vmax = max(float(np.max(plots["gap_map_before"])), float(plots["threshold"]) * 1.5, 1.0)
+    for ax, key, title in ((axes[0], "gap_map_before", "nominal model"), (axes[1], "gap_map_after", "with effects")):
+        data = np.asarray(plots[key])
+        image = ax.imshow(data, aspect="auto", cmap="magma_r", vmin=0.0, vmax=vmax)
+        ax.set_yticks(range(len(CHANNELS)), CHANNELS, fontsize=8)
+        ax.set_xticks(range(len(labels)), labels, rotation=60, fontsize=7)
+        for (i, j), value in np.ndenumerate(data):
+            if value >= float(plots["threshold"]):
+                ax.text(j, i, "*", ha="center", va="center", color="cyan", fontsize=10)
+        ax.set_title(f"-log10 p by channel and band: {title}", fontsize=10)
+        figure.colorbar(image, ax=ax, fraction=0.046)
+    figure.suptitle(f"gap map (* above the threshold {plots['threshold']:.2f})", fontsize=11)
+    figure.tight_layout(rect=(0, 0, 1, 0.95))
+    figure.savefig(out / "gap_map.png", dpi=90)
+    written.append("gap_map.png")
+    return written
+
+
+def write_report(result: DiagnosisResult, out_dir: str | Path, plots: bool = True) -> dict[str, Path]:
+    """Write ``report.json``, ``report.md`` and the PNG plots.
+
+    Parameters
+    ----------
+    result : DiagnosisResult
+        The diagnosis.
+    out_dir : str or pathlib.Path
+        Directory (created if missing).
+    plots : bool
+        Also write the PNG plots.
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        Written files by name.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = {}
+    with open(out / "report.json", "w", encoding="utf-8") as stream:
+        json.dump(result.to_json_dict(), stream, indent=1, default=_json_default, allow_nan=False)
+    files["report.json"] = out / "report.json"
+    names = ["report.json", "report.md"]
+    if plots and result.status == "ok":
+        for name in _plots(result, out):
+            files[name] = out / name
+            names.append(name)
+    (out / "report.md").write_text(_markdown(result, names), encoding="utf-8")
+    files["report.md"] = out / "report.md"
+    return files
