@@ -3,14 +3,9 @@
 from __future__ import annotations
 
 import os
-import sys
-from collections.abc import Callable, Iterator
-from pathlib import Path
+from collections.abc import Iterator
 
 import pytest
-
-REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
 
 # The embedded runtime is what these tests exercise, also on a machine where rclpy imports.
 os.environ.setdefault("TAIJI2_RUNTIME", "cyclonedds")
@@ -35,22 +30,3 @@ def executor(context: object) -> Iterator[object]:
     ex = rclpy.executors.SingleThreadedExecutor(context=context)
     yield ex
     ex.shutdown()
-
-
-def spin_until(executor: object, predicate: Callable[[], bool], timeout_s: float = 10.0) -> bool:
-    """Spin ``executor`` until ``predicate()`` holds or ``timeout_s`` passes; returns the predicate."""
-    import time
-
-    deadline = time.monotonic() + timeout_s
-    while not predicate() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-    return predicate()
-
-
-def python_subprocess_env() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONUNBUFFERED"] = "1"
-    return env
-
-
-PYTHON = sys.executable

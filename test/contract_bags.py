@@ -9,7 +9,7 @@ import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from conftest import REPO
+from support import REPO
 
 ST, GRS, CMD = "taiji2_msgs/msg/StarTracker", "taiji2_msgs/msg/GrsVoltages", "geometry_msgs/msg/WrenchStamped"
 TOPICS = {"/taiji2/star_tracker": ST, "/taiji2/grs1/voltages": GRS, "/taiji2/grs2/voltages": GRS,

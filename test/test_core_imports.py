@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import subprocess
 
-from conftest import PYTHON, python_subprocess_env
+from support import PYTHON, python_subprocess_env
 
 CHECK = """
 import importlib, pkgutil, sys

@@ -21,7 +21,7 @@ from rosbags.rosbag2 import Reader
 
 from taiji2_runtime.interfaces import typestore
 
-from conftest import PYTHON, REPO, python_subprocess_env
+from support import PYTHON, REPO, python_subprocess_env
 
 try:
     from taiji2_estimator_pkg.io import load_raw_bag

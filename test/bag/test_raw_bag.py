@@ -14,8 +14,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from taiji2_estimator_pkg.io import RawBagError, load_raw_bag
 from taiji2_runtime.bag.bulk_decode import encode_messages
 
-from conftest import PYTHON, REPO, python_subprocess_env
 from contract_bags import CMD, GRS, ST, TOPICS, write_ground_segment_bag
+from support import PYTHON, REPO, python_subprocess_env
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])

@@ -13,8 +13,8 @@ from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
-from conftest import PYTHON, python_subprocess_env
 from contract_bags import simulated_data, write_ground_segment_bag
+from support import PYTHON, python_subprocess_env
 
 DURATION_S = 2400.0
 

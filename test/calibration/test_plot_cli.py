@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import subprocess
 
-from conftest import PYTHON, python_subprocess_env
+from support import PYTHON, python_subprocess_env
 
 FIGURES = ("angular_acceleration_fit", "scale_factors_vs_time", "com_offsets_vs_time", "error_vs_crlb")
 

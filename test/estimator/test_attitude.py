@@ -12,7 +12,7 @@ from taiji2_estimator_pkg.core.attitude import (
 )
 from taiji2_estimator_pkg.core.validation import InputValidator, ValidationOptions, validate_batch
 
-from conftest import noise_free, simulate
+from estimator_support import noise_free, simulate
 
 
 def _random_walk_quaternions(n: int = 2000, seed: int = 1) -> np.ndarray:

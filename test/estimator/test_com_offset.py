@@ -10,7 +10,7 @@ from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.pipeline import calibrate
 from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorFilter, ScaleFactorEstimator
 
-from conftest import simulate, truth
+from estimator_support import simulate, truth
 
 
 def _run_per_sample(co, out, omega, scale_factors, rows=slice(None)):

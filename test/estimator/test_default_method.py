@@ -22,7 +22,7 @@ from taiji2_estimator_pkg.core.crlb import crlb_for_layout
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.pipeline import calibrate
 
-from conftest import simulate, truth
+from estimator_support import simulate, truth
 
 DIFF = np.hstack((np.eye(3), -np.eye(3)))
 SEEDS = 10

@@ -8,7 +8,7 @@ import pytest
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorFilter, ScaleFactorEstimator
 
-from conftest import simulate, truth
+from estimator_support import simulate, truth
 
 
 def _per_sample(est, out, rows=slice(None), columns=(0, 1)):

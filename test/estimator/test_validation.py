@@ -6,7 +6,7 @@ from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.scale_factor import ScaleFactorEstimator
 from taiji2_estimator_pkg.core.validation import InputValidator, validate_batch
 
-from conftest import simulate
+from estimator_support import simulate
 
 
 def _corrupt(out):

@@ -17,7 +17,7 @@ from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
-from conftest import REPO, spin_until
+from support import REPO, spin_until
 
 PARAMS_FILE = REPO / "src" / "taiji2_estimator_pkg" / "config" / "estimators.yaml"
 N = 3000  # 300 s at 10 Hz

@@ -11,7 +11,7 @@ import numpy as np
 
 from taiji2_runtime.ros import messages, rclpy
 
-from conftest import PYTHON, python_subprocess_env
+from support import PYTHON, python_subprocess_env
 
 RAW_TOPICS = ["/taiji2/star_tracker", "/taiji2/grs1/voltages", "/taiji2/grs2/voltages"]
 DURATION_S = 900.0

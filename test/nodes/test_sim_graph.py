@@ -13,7 +13,7 @@ from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_bat
 from taiji2_sim_pkg.nodes.maneuver_commander import ManeuverCommander
 from taiji2_sim_pkg.nodes.spacecraft_sim import SpacecraftSim
 
-from conftest import spin_until
+from support import spin_until
 
 RAW = {"/taiji2/star_tracker": "StarTracker", "/taiji2/grs1/voltages": "GrsVoltages",
        "/taiji2/grs2/voltages": "GrsVoltages"}

@@ -6,7 +6,7 @@ import pytest
 
 from taiji2_runtime.ros import messages, rclpy
 
-from conftest import spin_until
+from support import spin_until
 
 Node = rclpy.node.Node
 QoS = rclpy.qos

@@ -18,7 +18,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from conftest import PYTHON, python_subprocess_env
+from support import PYTHON, python_subprocess_env
 
 
 # Hand-written from the ROS 2 conventions only (rosidl IDL of geometry_msgs/WrenchStamped):

@@ -1,0 +1,27 @@
+"""Helpers shared by the tests (a plain module: `conftest` names collide across test folders)."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+PYTHON = sys.executable
+
+
+def spin_until(executor: object, predicate: Callable[[], bool], timeout_s: float = 10.0) -> bool:
+    """Spin ``executor`` until ``predicate()`` holds or ``timeout_s`` passes; returns the predicate."""
+    deadline = time.monotonic() + timeout_s
+    while not predicate() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+    return predicate()
+
+
+def python_subprocess_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
