@@ -20,6 +20,7 @@ from .validation import ValidationOptions
 
 __all__ = [
     "DEFAULTS",
+    "NODE_DEFAULTS",
     "com_offset_options",
     "default_parameters_file",
     "flatten",
@@ -53,7 +54,14 @@ DEFAULTS: dict[str, dict[str, Any]] = {
         "paper.gate_probability": 0.0, **_VALIDATION, "checkpoint_file": "", "checkpoint_period_s": 10.0,
     },
 }
-"""Default of every parameter, per node (dotted keys)."""
+"""Default of every parameter of the estimation core, per node (dotted keys)."""
+
+NODE_DEFAULTS: dict[str, dict[str, Any]] = {
+    "scale_factor_estimator": {"publish_period_s": 1.0, "max_stream_silence_s": 2.0, "starved_after_s": 5.0},
+    "com_offset_estimator": {"publish_period_s": 1.0, "max_stream_silence_s": 2.0, "starved_after_s": 5.0,
+                             "use_rate_estimate": False, "paper_batch_period_s": 600.0},
+}
+"""Defaults of the keys only the ROS nodes read (publishing, stream alignment, diagnostics), per node."""
 
 
 def default_parameters_file() -> Path | None:
@@ -114,6 +122,8 @@ def load_parameters(node: str, source: str | os.PathLike[str] | Mapping[str, Any
     section = (raw or {}).get(node, {}) or {}
     section = section.get("ros__parameters", section) or {}
     for key, value in {**flatten(section), **dict(overrides or {})}.items():
+        if key in NODE_DEFAULTS.get(node, {}):
+            continue  # node glue, not the core
         if key not in params:
             raise ValueError(f"{node}.{key}: unknown parameter")
         params[key] = value

@@ -14,7 +14,7 @@ import numpy as np
 
 from taiji2_estimator_pkg.checkpoint import load_checkpoint, save_checkpoint
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
-from taiji2_estimator_pkg.core.parameters import DEFAULTS
+from taiji2_estimator_pkg.core.parameters import DEFAULTS, NODE_DEFAULTS
 from taiji2_estimator_pkg.epochs import EpochAssembler
 from taiji2_runtime.ros import messages, rclpy
 
@@ -35,12 +35,6 @@ def descriptor(description: str, *, low: float | None = None, high: float | None
     return d
 
 
-#: Parameters of the node glue (not of the estimation core), documented in config/estimators.yaml.
-NODE_PARAMETERS: dict[str, dict[str, Any]] = {
-    "scale_factor_estimator": {"publish_period_s": 1.0, "max_stream_silence_s": 2.0, "starved_after_s": 5.0},
-    "com_offset_estimator": {"publish_period_s": 1.0, "max_stream_silence_s": 2.0, "starved_after_s": 5.0,
-                             "use_rate_estimate": False, "paper_batch_period_s": 600.0},
-}
 #: Core keys the nodes fix: both GRS are always estimated jointly (the two topics of the contract).
 _FIXED = {"grs_ids": [1, 2]}
 
@@ -49,9 +43,9 @@ def declare_parameters(node: Any, node_name: str) -> dict[str, Any]:
     """Declare every parameter of ``node_name`` (core defaults + node glue); returns dotted-key values.
 
     The keys, meanings, units and defaults are documented in ``config/estimators.yaml``; the core's
-    ``parameters.DEFAULTS`` table and :data:`NODE_PARAMETERS` are their single source in code.
+    ``parameters.DEFAULTS`` and ``parameters.NODE_DEFAULTS`` tables are their single source in code.
     """
-    table = {**DEFAULTS[node_name], **NODE_PARAMETERS[node_name]}
+    table = {**DEFAULTS[node_name], **NODE_DEFAULTS[node_name]}
     values: dict[str, Any] = dict(_FIXED)
     for key, default in table.items():
         if key in _FIXED:

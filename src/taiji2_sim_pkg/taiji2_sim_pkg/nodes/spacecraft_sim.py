@@ -103,6 +103,9 @@ class SpacecraftSim(rclpy.node.Node):
                              f"got {list(self._wait_subscribers)}")
         self._exit_when_done = dp("exit_when_done", True, _descriptor("shut down after duration_s")).value
         self._publish_truth = dp("publish_truth", True, _descriptor("publish ground truth under /taiji2/sim/")).value
+        self._linger_s = dp("linger_s", 1.0, _descriptor(
+            "after the end, stay up this long before exiting, so that late subscribers (recorders) still get "
+            "the latched provenance [s]", float_range=(0.0, 3600.0))).value
 
         config = load_config(config_file or layout, overrides=_overrides([o for o in overrides if o]))
         self._sim = Simulator(config, seed=None if seed < 0 else seed)
@@ -128,8 +131,8 @@ class SpacecraftSim(rclpy.node.Node):
                            if self._mode == "accelerated" else None)
         self._truth = _TruthPublishers(self, reliable_all) if self._publish_truth else None
         latched = rclpy.qos.QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
-        provenance_pub = self.create_publisher(m.std_msgs.String, "/taiji2/sim/provenance", latched)
-        provenance_pub.publish(m.std_msgs.String(data=json.dumps(self._sim.provenance())))
+        self._provenance_pub = self.create_publisher(m.std_msgs.String, "/taiji2/sim/provenance", latched)
+        self._provenance_pub.publish(m.std_msgs.String(data=json.dumps(self._sim.provenance())))
         self.create_subscription(m.geometry_msgs.WrenchStamped, COMMAND_TOPIC, self._on_command, reliable_all)
 
         if self._mode == "realtime":
@@ -263,7 +266,12 @@ class SpacecraftSim(rclpy.node.Node):
                                f"{np.round(summary['total']['fraction_of_range'], 3).tolist()}; "
                                f"{self._gate.rejected_total} commands rejected, {self._late_commands} late")
         if self._exit_when_done:
-            self.context.try_shutdown("simulation finished")
+            self._exit_timer = self.create_timer(self._linger_s, self._exit, clock=_steady_clock())
+
+    def _exit(self) -> None:
+        self._exit_timer.cancel()
+        self._provenance_pub.wait_for_all_acked(rclpy.duration.Duration(seconds=2))
+        self.context.try_shutdown("simulation finished")
 
     # -- output --------------------------------------------------------------------------------
     def _check_range(self, t_s: Any, maneuver: Any, total: Any) -> None:
