@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .attitude import SmoothingDerivative
+from .estimate_blocks import PerGrsBlocks
 from .instrument import LINEAR_FROM_ANGULAR, InstrumentModel, angular_differences, linear_scale_factors, linear_sums
 from .kalman import KalmanFilter, chi2_gate
 from .scale_factor import ScaleFactorEstimate, ScaleFactorModel, _EpochArrays
@@ -80,7 +81,7 @@ def cross_matrix(v: ArrayLike) -> np.ndarray:
 
 
 @dataclass
-class ComOffsetEstimate:
+class ComOffsetEstimate(PerGrsBlocks):
     """c.m.-offset estimate of one or two GRS (CRF).
 
     Attributes
@@ -121,16 +122,6 @@ class ComOffsetEstimate:
     rejected: dict[str, dict[str, int]] = field(default_factory=dict)
     method: str = "gls"
 
-    def of(self, grs_id: int) -> tuple[np.ndarray, np.ndarray]:
-        """(d (3,), covariance (3, 3)) of one GRS."""
-        i = self.grs_ids.index(grs_id)
-        sl = slice(3 * i, 3 * i + 3)
-        return self.values[sl], self.covariance[sl, sl]
-
-    @property
-    def sigma(self) -> np.ndarray:
-        """(3 n_grs,) 1-sigma [m]."""
-        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
 
     def difference(self) -> tuple[np.ndarray, np.ndarray]:
         """(d_1 - d_2 (3,), covariance (3, 3)) [m], [m^2] (two GRS only)."""

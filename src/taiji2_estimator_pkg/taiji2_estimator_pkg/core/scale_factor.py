@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .attitude import AttitudeIntegrator, SmoothingDerivative, integrate_attitude
+from .estimate_blocks import PerGrsBlocks
 from .instrument import InstrumentModel, angular_differences, linear_sums
 from .kalman import KalmanFilter, chi2_gate
 from .twostage import StateSpaceModel, TwoStageFilter, solve_information
@@ -59,7 +60,7 @@ __all__ = [
 
 
 @dataclass
-class ScaleFactorEstimate:
+class ScaleFactorEstimate(PerGrsBlocks):
     """Scale-factor estimate of one or two GRS.
 
     Attributes
@@ -94,16 +95,6 @@ class ScaleFactorEstimate:
     rejected: dict[str, dict[str, int]] = field(default_factory=dict)
     method: str = "gls"
 
-    def of(self, grs_id: int) -> tuple[np.ndarray, np.ndarray]:
-        """(G (3,), covariance (3, 3)) of one GRS."""
-        i = self.grs_ids.index(grs_id)
-        sl = slice(3 * i, 3 * i + 3)
-        return self.values[sl], self.covariance[sl, sl]
-
-    @property
-    def sigma(self) -> np.ndarray:
-        """(3 n_grs,) 1-sigma [rad s^-2 V^-1]."""
-        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict (JSON/YAML, messages, checkpoints)."""
