@@ -1,0 +1,157 @@
+"""Run a campaign on Dask: an embedded LocalCluster by default, or any existing cluster.
+
+Cases go to the scheduler as independent tasks (``client.submit``); Dask reschedules a case whose
+worker dies, and every case is deterministic for its seed, so a rerun gives the same rows. The
+client writes completed cases to Parquet chunks as they arrive, so an interrupted campaign keeps
+what it finished and a rerun with the same output directory skips it.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+from .case import run_case
+from .spec import expand_cases
+from .store import done_case_hashes, provenance, write_chunk
+
+#: One BLAS thread per worker process: the parallelism is across cases.
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+
+
+@dataclass
+class CampaignRun:
+    """What a call of :func:`run_campaign` did."""
+
+    total: int
+    skipped: int
+    completed: int
+    failed: int
+    wall_s: float
+    compute_s: float
+    workers: int
+    files: list[Path]
+
+
+def run_campaign(spec: Mapping[str, Any], out_dir: str | os.PathLike[str], *, scheduler: str | None = None,
+                 workers: int | None = None, progress: TextIO | None = sys.stderr,
+                 on_result: Callable[[dict[str, Any]], None] | None = None) -> CampaignRun:
+    """Run every case of a validated spec not yet recorded in ``out_dir``.
+
+    Parameters
+    ----------
+    spec : mapping
+        Output of :func:`~.spec.load_spec`.
+    out_dir : path
+        Campaign directory (Parquet chunks); created if missing.
+    scheduler : str, optional
+        Address of an existing Dask scheduler, e.g. ``tcp://host:8786``; default: an embedded
+        LocalCluster.
+    workers : int, optional
+        Worker processes of the embedded cluster (default: one per core).
+    progress : text stream, optional
+        Where progress lines go (None: silent).
+    on_result : callable, optional
+        Called with each completed case result (tests use it to interrupt).
+
+    Raises
+    ------
+    ConnectionError
+        The scheduler cannot be reached (the message names the address).
+    """
+    from dask.distributed import as_completed
+
+    out = Path(out_dir)
+    cases = expand_cases(spec)
+    done = done_case_hashes(out) if out.exists() else set()
+    todo = [c for c in cases if c["case_hash"] not in done]
+    meta = provenance(spec)
+    run = CampaignRun(total=len(cases), skipped=len(cases) - len(todo), completed=0, failed=0, wall_s=0.0,
+                      compute_s=0.0, workers=0, files=[])
+    _say(progress, f"campaign {spec['name']!r}: {len(cases)} cases, {run.skipped} already done, {len(todo)} to run")
+    if not todo:
+        return run
+    client, cluster = _connect(scheduler, workers)
+    try:
+        run.workers = len(client.scheduler_info().get("workers", {}))
+        _say(progress, f"dask: {run.workers} workers; dashboard: {_dashboard(client)}")
+        started = time.perf_counter()  # wall time of the cases, cluster start-up excluded
+        futures = [client.submit(run_case, case, key=f"taiji2-case-{case['case_hash']}", pure=False, retries=1)
+                   for case in todo]
+        by_hash = {case["case_hash"]: case for case in todo}
+        buffer: list[dict[str, Any]] = []
+        last = 0.0
+        try:
+            for future in as_completed(futures):
+                result = future.result()
+                case = by_hash[result["case_hash"]]
+                result.update(group=case["group"], seed=case["seed"])
+                buffer.append(result)
+                run.completed += 1
+                run.failed += result["status"] != "ok"
+                run.compute_s += result["compute_s"]
+                if len(buffer) >= spec["chunk_size"]:
+                    run.files.append(write_chunk(out, buffer, meta))
+                    buffer = []
+                now = time.perf_counter()
+                if now - last > 1.0 or run.completed == len(todo):
+                    last = now
+                    _progress(progress, run, len(todo), now - started)
+                if on_result is not None:
+                    on_result(result)
+            run.wall_s = time.perf_counter() - started
+        finally:
+            # whatever finished is kept, also on Ctrl-C
+            if buffer:
+                run.files.append(write_chunk(out, buffer, meta))
+            for future in futures:
+                future.cancel()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return run
+
+
+def _connect(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="10s"), None
+        except (OSError, TimeoutError) as exc:
+            raise ConnectionError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+    os.environ.update(WORKER_ENV)  # inherited by the worker processes the nannies start
+    n = workers or os.cpu_count() or 1
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                           dashboard_address=":0" if _has_bokeh() else None, silence_logs=40)
+    return Client(cluster), cluster
+
+
+def _has_bokeh() -> bool:
+    from importlib.util import find_spec
+
+    return find_spec("bokeh") is not None
+
+
+def _dashboard(client: Any) -> str:
+    if not _has_bokeh():
+        return "disabled (bokeh not installed; `pip install bokeh` enables it)"
+    return str(client.dashboard_link)
+
+
+def _progress(stream: TextIO | None, run: CampaignRun, todo: int, elapsed_s: float) -> None:
+    rate = run.completed / elapsed_s if elapsed_s > 0 else 0.0
+    eta = (todo - run.completed) / rate if rate > 0 else float("nan")
+    _say(stream, f"{run.completed}/{todo} cases ({run.failed} failed), {rate:.2f} cases/s, "
+                 f"elapsed {elapsed_s:.0f} s, ETA {eta:.0f} s")
+
+
+def _say(stream: TextIO | None, line: str) -> None:
+    if stream is not None:
+        print(f"[campaign] {line}", file=stream, flush=True)
