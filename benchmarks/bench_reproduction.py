@@ -5,11 +5,12 @@ maneuver_commander, scale_factor_estimator, com_offset_estimator as separate pro
 embedded runtime), thruster force noise on, for the paper's method and the default method; the
 paper's published values (its Tables "scale factors" and "c.m. offsets") beside ours, +-1 sigma.
 
-Part 2 (cores directly, parallel processes): for each layout, thruster force noise on and off,
+Part 2 (campaign engine on a Dask LocalCluster, campaigns/reproduction_mc.yaml): for each layout,
+thruster force noise on and off,
 >= 20 seeds: per parameter the mean error, error std, mean reported sigma, the CRLB, and the
 ratios error std / mean sigma (honesty, goal [0.8, 1.25]) and error std / CRLB (goal <= 1.2).
 
-    python benchmarks/bench_reproduction.py [--seeds 30] [--duration-s 10800] [--skip-graph] [--processes 2]
+    python benchmarks/bench_reproduction.py [--seeds 30] [--duration-s 10800] [--skip-graph] [--workers 2]
 """
 
 from __future__ import annotations
@@ -20,7 +21,6 @@ import os
 import subprocess
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
@@ -81,53 +81,22 @@ def print_graph_tables(layout: str, runs: dict[str, dict], duration_s: float) ->
         print(f"  ({method}: {duration_s:g} s simulated in {runs[method]['wall_s']:.0f} s wall)")
 
 
-def monte_carlo_one(args: tuple[str, bool, int, float]) -> dict:
-    from taiji2_estimator_pkg.core.instrument import InstrumentModel
-    from taiji2_estimator_pkg.core.pipeline import calibrate
-    from taiji2_sim_pkg.core.config import load_config
-    from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
+def monte_carlo(layouts: list[str], seeds: int, duration_s: float, workers: int) -> str:
+    """The Monte Carlo part as a campaign (campaigns/reproduction_mc.yaml, sized by the arguments)."""
+    import tempfile
+    from pathlib import Path
 
-    layout, force_on, seed, duration_s = args
-    overrides = {"maneuver.duration_s": duration_s, "noise.thruster_force.enabled": force_on}
-    config = load_config(layout, overrides=overrides)
-    instrument = InstrumentModel.from_layout(config)
-    out = simulate_batch(config, seed, maneuver_torque_commands(config))
-    g_true = np.concatenate([s.angular_scale_factors for s in config.grs.sensors])
-    d_true = np.concatenate([s.com_offset_m for s in config.grs.sensors])
-    row = {}
-    for method in ("gls", "paper"):
-        r = calibrate(out.t_s, out.st_quat_xyzw, out.voltages_v, instrument, method=method)
-        diff, diff_cov = r.com_offsets.difference()
-        row[method] = {
-            "g_err": ((r.scale_factors.values - g_true) / g_true).tolist(),
-            "g_sig": (r.scale_factors.sigma / g_true).tolist(),
-            "d_err": (r.com_offsets.values - d_true).tolist(), "d_sig": r.com_offsets.sigma.tolist(),
-            "dd_err": (np.asarray(diff) - (d_true[:3] - d_true[3:])).tolist(),
-            "dd_sig": np.sqrt(np.diag(diff_cov)).tolist()}
-    return row
+    from taiji2_estimator_pkg.campaign.engine import run_campaign
+    from taiji2_estimator_pkg.campaign.spec import load_spec
+    from taiji2_estimator_pkg.campaign.store import read_rows
+    from taiji2_estimator_pkg.campaign.summary import format_summary, summarize_table
 
-
-def print_monte_carlo(layout: str, force_on: bool, rows: list[dict], bound: object) -> None:
-    n = len(rows)
-    print(f"\n=== Monte Carlo {layout}, thruster force noise {'on' if force_on else 'off'}, {n} seeds ===")
-    crlb = {"g": np.asarray(bound.scale_factor_relative_sigma), "d": np.asarray(bound.com_offset_sigma),
-            "dd": np.asarray(bound.difference_sigma())}
-    names = [f"GRS{g} {p}" for g in (1, 2) for p in G_NAMES]
-    dnames = [f"GRS{g} d{a}" for g in (1, 2) for a in AXES]
-    ddnames = [f"d1-d2 {a}" for a in AXES]
-    for key, labels, scale, unit in (("g", names, 100.0, "%"), ("d", dnames, 1e6, "um"), ("dd", ddnames, 1e6, "um")):
-        print(f"  {'[' + unit + ']':14} {'mean err':>10} {'err std':>10} {'mean sig':>10} {'CRLB':>10} "
-              f"{'std/sig':>8} {'std/CRLB':>8} | paper: {'err std':>9} {'mean sig':>9} {'std/sig':>8}")
-        err = np.array([r["gls"][f"{key}_err"] for r in rows]) * scale
-        sig = np.array([r["gls"][f"{key}_sig"] for r in rows]) * scale
-        perr = np.array([r["paper"][f"{key}_err"] for r in rows]) * scale
-        psig = np.array([r["paper"][f"{key}_sig"] for r in rows]) * scale
-        for j, label in enumerate(labels):
-            std = err[:, j].std(ddof=1)
-            print(f"  {label:14} {err[:, j].mean():10.4g} {std:10.4g} {sig[:, j].mean():10.4g} "
-                  f"{crlb[key][j] * scale:10.4g} {std / sig[:, j].mean():8.2f} {std / (crlb[key][j] * scale):8.2f} | "
-                  f"{perr[:, j].std(ddof=1):16.4g} {psig[:, j].mean():9.3g} "
-                  f"{perr[:, j].std(ddof=1) / psig[:, j].mean():8.1f}")
+    spec = load_spec({"name": "reproduction_mc", "layouts": layouts, "durations_s": [duration_s],
+                      "seeds": {"start": 1000, "count": seeds}, "methods": ["gls", "paper"],
+                      "grid": {"noise.thruster_force.enabled": [True, False]}})
+    with tempfile.TemporaryDirectory() as tmp:
+        run_campaign(spec, Path(tmp), workers=workers)
+        return format_summary(summarize_table(read_rows(Path(tmp))))
 
 
 def main() -> None:
@@ -135,22 +104,16 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=30)
     parser.add_argument("--duration-s", type=float, default=10800.0)
     parser.add_argument("--skip-graph", action="store_true")
-    parser.add_argument("--processes", type=int, default=2)
+    parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
-    from taiji2_estimator_pkg.core.crlb import crlb_for_layout
-
-    for layout in ("type1", "type2"):
-        if not args.skip_graph:
+    layouts = ["type1", "type2"]
+    if not args.skip_graph:
+        for layout in layouts:
             runs = {method: run_graph(layout, method, args.duration_s, seed=1) for method in ("paper", "gls")}
             print_graph_tables(layout, runs, args.duration_s)
-        for force_on in (True, False):
-            jobs = [(layout, force_on, 1000 + s, args.duration_s) for s in range(args.seeds)]
-            with ProcessPoolExecutor(max_workers=args.processes) as pool:
-                rows = list(pool.map(monte_carlo_one, jobs))
-            bound = crlb_for_layout(layout, args.duration_s,
-                                    overrides={"noise.thruster_force.enabled": force_on})
-            print_monte_carlo(layout, force_on, rows, bound)
-        sys.stdout.flush()
+            sys.stdout.flush()
+    print("\n=== Monte Carlo (campaign engine; units: G in % of truth, d in um) ===")
+    print(monte_carlo(layouts, args.seeds, args.duration_s, args.workers))
 
 
 if __name__ == "__main__":
