@@ -28,8 +28,9 @@ Two evaluation paths give the same numbers (to rounding):
   ``snap_tolerance`` (then it is set to it exactly);
 - :meth:`TwoStageFilter.run_regular`: a run of regular samples at the steady state in bulk: the
   closed loop ``A = F (I - K H)`` is diagonalised block by block (the model supplies coordinates
-  in which it is block diagonal) and each mode is a first-order recursion evaluated by
-  :func:`scipy.signal.lfilter`.
+  in which it is block diagonal) and each mode is a first-order recursion evaluated in bulk by
+  :func:`first_order_recursion` (blocked scaled prefix sums: numpy only, so that importing the
+  estimators does not import scipy.signal, which costs more than a whole calibration's filtering).
 """
 
 from __future__ import annotations
@@ -40,19 +41,101 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.linalg import solve_discrete_are
-from scipy.signal import lfilter
 
 __all__ = [
     "RegularRunOutput",
     "StateSpaceModel",
     "StepInfo",
     "TwoStageFilter",
+    "first_order_recursion",
     "solve_information",
     "steady_state_prior_covariance",
 ]
 
 _CHUNK = 4096  # samples per block of the bulk path (memory, not numerics)
+#: largest |lambda|^-j inside one block of :func:`first_order_recursion` (bounds the rounding growth)
+_BLOCK_GROWTH = 100.0
+
+
+def _doubling_recursion(mu: complex, drive: np.ndarray) -> np.ndarray:
+    """``y_k = mu y_{k-1} + x_k`` (``y_-1 = 0``) by recursive doubling (log2 passes; |mu| small)."""
+    y = drive.copy()
+    shift, power = 1, mu
+    # after the pass with shift s, y_k = sum_{i < 2s} mu^i x_{k-i}: stop once mu^s is below rounding
+    while shift < y.shape[0] and abs(power) > 1e-18:
+        y[shift:] = y[shift:] + power * y[:-shift]
+        shift, power = 2 * shift, power * power
+    return y
+
+
+def _block_scales(lam: complex, block: int) -> tuple[np.ndarray, np.ndarray]:
+    """``lam^-j`` and ``lam^(j+1)`` for j = 0..block-1 (cached: a filter has few modes)."""
+    key = (complex(lam), block)
+    cached = _SCALES.get(key)
+    if cached is None:
+        powers = np.arange(block, dtype=np.float64)
+        cached = (lam ** -powers, lam ** (powers + 1.0))
+        if len(_SCALES) > 64:
+            _SCALES.clear()
+        _SCALES[key] = cached
+    return cached
+
+
+_SCALES: dict[tuple[complex, int], tuple[np.ndarray, np.ndarray]] = {}
+
+
+def first_order_recursion(lam: complex, drive: np.ndarray, initial: np.ndarray) -> np.ndarray:
+    """``y_k = lam y_{k-1} + x_k`` for k = 0..L-1 with ``y_-1 = initial``, in bulk.
+
+    The same as ``scipy.signal.lfilter([1], [1, -lam], x, axis=0, zi=lam * initial)``, evaluated
+    without a Python loop over samples: the record is cut into blocks of B samples with
+    ``|lam|^-B <= 100``; inside a block ``y_{s+j} = lam^(j+1) (y_{s-1} + sum_{i<=j} lam^-(i+1) x_{s+i})``
+    (a scaled cumulative sum), and the values carried from block to block obey the same recursion
+    with ``lam^B`` (small), solved by recursive doubling. Rounding grows by at most ~100 eps.
+
+    Parameters
+    ----------
+    lam : complex or float
+        Pole, ``|lam| <= 1``.
+    drive : numpy.ndarray
+        (L, ...) input x.
+    initial : numpy.ndarray
+        (...) state before the first sample.
+
+    Returns
+    -------
+    numpy.ndarray
+        (L, ...) y, complex if ``lam`` or the input is.
+    """
+    length = drive.shape[0]
+    dtype = np.result_type(drive.dtype, np.asarray(initial).dtype, type(lam))
+    if length == 0:
+        return np.zeros(drive.shape, dtype=dtype)
+    magnitude = abs(lam)
+    if magnitude == 0.0:
+        return drive.astype(dtype, copy=True)
+    decay = -np.log(magnitude) if magnitude < 1.0 else 0.0
+    block = length if decay == 0.0 else int(max(1, min(length, np.log(_BLOCK_GROWTH) // decay)))
+    tail = drive.shape[1:]
+    n_blocks = -(-length // block)
+    inverse, forward = _block_scales(lam, block)
+    shape = (1, block) + (1,) * len(tail)
+    work = np.empty((n_blocks, block, *tail), dtype=dtype)
+    flat = work.reshape(n_blocks * block, *tail)
+    # z = lam^-(j+1) x (scaled input), then its running sum inside each block
+    np.multiply(drive, np.tile(inverse / lam, n_blocks)[:length].reshape((length,) + (1,) * len(tail)),
+                out=flat[:length])
+    flat[length:] = 0.0
+    np.cumsum(work, axis=1, out=work)
+    # carried state c_b = y at the end of block b-1: c_b = lam^B c_{b-1} + lam^B * running sum_{b-1, last}
+    carry_drive = np.empty((n_blocks, *tail), dtype=dtype)
+    carry_drive[0] = np.asarray(initial, dtype=dtype)
+    carry_drive[1:] = forward[-1] * work[:-1, -1]
+    carry = _doubling_recursion(lam ** block, carry_drive)
+    # y = lam^(j+1) (c_b + running sum)
+    work += carry[:, None]
+    work *= forward.reshape(shape)
+    return flat[:length]
 
 
 @dataclass(frozen=True)
@@ -171,6 +254,8 @@ def steady_state_prior_covariance(f: np.ndarray, h: np.ndarray, q: np.ndarray, r
         h_k = h_next
         if change <= 1e-15 * np.max(np.abs(h_k)) and np.max(np.abs(a_k)) < 1e-8:
             return h_k
+    from scipy.linalg import solve_discrete_are  # fallback only (rarely reached; a slow import)
+
     return solve_discrete_are(f.T, h.T, q, r)
 
 
@@ -609,9 +694,7 @@ class TwoStageFilter:
             modal[:, 0, :] = w_first
             if count > 1:
                 for i in self._filtered_modes:
-                    lam_i = modes[i]
-                    modal[i, 1:, :], _ = lfilter([1.0], [1.0, -lam_i], modal_drive[i], axis=0,
-                                                 zi=(lam_i * w_first[i])[None, :])
+                    modal[i, 1:, :] = first_order_recursion(modes[i], modal_drive[i], w_first[i])
                 for i, j in self._conjugate_partner.items():
                     modal[i, 1:, :] = np.conj(modal[j, 1:, :])
             priors = (v @ modal.reshape(n, -1)).reshape(n, count, cols)
