@@ -590,6 +590,7 @@ class ScaleFactorEstimator:
         initial = copy.deepcopy(self.filter)
         gated_st = np.zeros(epochs.count, dtype=bool)
         gated_pair = np.zeros(epochs.count, dtype=bool)
+        states = None  # filtered states of the last evaluation pass, if it used the final estimate
         for attempt in range(2):
             self.filter = copy.deepcopy(initial)
             self.diff_moment = np.zeros_like(self.diff_moment)
@@ -602,18 +603,20 @@ class ScaleFactorEstimator:
             theta, _, ok = self._solve()
             if self.gate is None or attempt == 1 or not ok:
                 break
-            nis_st, nis_pair, _ = self._evaluate(initial, epochs, gated_st, gated_pair, theta)
+            nis_st, nis_pair, states = self._evaluate(initial, epochs, gated_st, gated_pair, theta)
             new_st = (nis_st > self.gate) & ~gated_st
             new_pair = (nis_pair > self.gate) & ~gated_pair
             if not (np.any(new_st) or np.any(new_pair)):
-                break
+                break  # nothing newly gated: theta is final and ``states`` were evaluated with it
+            states = None
             gated_st |= new_st
             gated_pair |= new_pair
         self.filter.n_rejected = int(np.count_nonzero(gated_st))
         self.n_gated_grs = int(np.count_nonzero(gated_pair))
         theta, _, ok = self._solve()
         if want_rates and ok:
-            _, _, states = self._evaluate(initial, epochs, gated_st, gated_pair, theta)
+            if states is None:
+                _, _, states = self._evaluate(initial, epochs, gated_st, gated_pair, theta)
             self.rates = states[:, 3:] @ self.model.from_model.T
             self.rate_times = epochs.t.copy()
         if epochs.count:

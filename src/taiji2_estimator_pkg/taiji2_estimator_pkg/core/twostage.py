@@ -658,6 +658,7 @@ class TwoStageFilter:
         if self._real_modes:
             v, v_inv, modes, dtype = v.real, v_inv.real, modes.real, float
         whiten_t = self._whiten.T
+        v_b, v_fk, w_hv = v_inv @ mdl.b, v_inv @ fk, whiten_t @ mdl.h @ v
         xr_all = None if (x_reg is None or evaluation) else np.asarray(x_reg, dtype=np.float64)
         u0_all = None if u0 is None else np.asarray(u0, dtype=np.float64)
         ur_all = None if (u_reg is None or evaluation) else np.asarray(u_reg, dtype=np.float64)
@@ -667,16 +668,16 @@ class TwoStageFilter:
             count = stop - start
             yc = y[start:stop]
             xc = None if xr_all is None else xr_all[start:stop]
-            # state-major drive (n, count, cols) of z_k = A z_{k-1} + D_k
-            drive = np.zeros((n, count, cols))
+            # modal drive (n, count, cols) of w_k = lambda w_{k-1} + V^-1 D_k (index 0 unused), with
+            # D_k = B (u0_k + U_k theta) + F K (y_{k-1} - X_{k-1} theta): built in modal coordinates
+            modal_drive = np.zeros((n, count, cols), dtype=dtype)
             if u0_all is not None:
-                drive[:, :, 0] = mdl.b @ u0_all[start:stop].T
+                modal_drive[:, :, 0] = v_b @ u0_all[start:stop].T
             if ur_all is not None:
-                drive[:, :, 1:1 + p] = np.tensordot(mdl.b, ur_all[start:stop], axes=([1], [1]))
-            # feedback of the previous sample: F K (y_{k-1} - X_{k-1} theta)
-            drive[:, 1:, 0] += fk @ yc[:-1].T
+                modal_drive[:, :, 1:1 + p] = np.tensordot(v_b, ur_all[start:stop], axes=([1], [1]))
+            modal_drive[:, 1:, 0] += v_fk @ yc[:-1].T
             if xc is not None:
-                drive[:, 1:, 1:1 + p] -= np.tensordot(fk, xc[:-1], axes=([1], [1]))
+                modal_drive[:, 1:, 1:1 + p] -= np.tensordot(v_fk, xc[:-1], axes=([1], [1]))
             first = np.empty((n, cols))
             if self.fresh:
                 first[:, 0] = self.x
@@ -684,47 +685,55 @@ class TwoStageFilter:
                     first[:, 1:] = self.sens
                 self.fresh = False
             else:
-                first[:, 0] = mdl.f @ self.x + drive[:, 0, 0]
+                first[:, 0] = mdl.f @ self.x
+                if u0_all is not None:
+                    first[:, 0] += mdl.b @ u0_all[start]
                 if not evaluation:
-                    first[:, 1:] = mdl.f @ self.sens + drive[:, 0, 1:]
-            # modal coordinates: w_k = lambda w_{k-1} + V^-1 D_k (one filter per conjugate pair)
+                    first[:, 1:] = mdl.f @ self.sens
+                    if ur_all is not None:
+                        first[:, 1:1 + p] += mdl.b @ ur_all[start]
             w_first = v_inv @ first
-            modal_drive = (v_inv @ drive[:, 1:, :].reshape(n, -1)).reshape(n, count - 1, cols)
             modal = np.empty((n, count, cols), dtype=dtype)
             modal[:, 0, :] = w_first
             if count > 1:
                 for i in self._filtered_modes:
-                    modal[i, 1:, :] = first_order_recursion(modes[i], modal_drive[i], w_first[i])
+                    modal[i, 1:, :] = first_order_recursion(modes[i], modal_drive[i, 1:], w_first[i])
                 for i, j in self._conjugate_partner.items():
                     modal[i, 1:, :] = np.conj(modal[j, 1:, :])
-            priors = (v @ modal.reshape(n, -1)).reshape(n, count, cols)
+            # prior states x^_k = V w_k (data column) and innovations e0 = y - H x^
+            states = v @ modal[:, :, 0]
             if dtype is complex:
-                priors = priors.real
-            # innovations e0 = y - H x^ and sensitivities S = H M + X
-            e0 = yc.T - mdl.h @ priors[:, :, 0]  # (m, count)
+                states = states.real
+            e0 = yc.T - mdl.h @ states  # (m, count)
             if evaluation:
-                innovations = e0.T
                 ew = whiten_t @ e0
                 nis_parts.append(np.sum(ew * ew, axis=0))
                 if want_innovations:
-                    innov_parts.append(innovations)
+                    innov_parts.append(e0.T)
                 if want_states:
-                    state_parts.append((priors[:, :, 0] + gain @ e0).T)
+                    state_parts.append((states + gain @ e0).T)
+                last = states[:, -1:]
             else:
-                s = (mdl.h @ priors[:, :, 1:].reshape(n, -1)).reshape(m, count, qt)
+                # whitened sensitivities L^T S, S = H M + X = (H V) w + X
+                sw = np.tensordot(w_hv, modal[:, :, 1:], axes=([1], [0]))  # (m, count, qt)
+                if dtype is complex:
+                    sw = sw.real.copy()
                 if xc is not None:
-                    s[:, :, :p] += np.moveaxis(xc, 0, 1)
+                    sw[:, :, :p] += np.tensordot(whiten_t, xc, axes=([1], [1]))
+                sw = sw.reshape(m * count, qt)
                 ew = (whiten_t @ e0).reshape(-1)
-                sw = (whiten_t @ s.reshape(m, -1)).reshape(m * count, qt)
                 self.info += sw.T @ sw
                 self.vector += sw.T @ ew
                 self.chi2 += float(ew @ ew)
                 self.n_updates += count
                 self.dof_total += count * m
+                last = v @ modal[:, -1, :]
+                if dtype is complex:
+                    last = last.real
             # posterior of the last step of the chunk
-            self.x = i_kh @ priors[:, -1, 0] + gain @ yc[-1]
+            self.x = i_kh @ last[:, 0] + gain @ yc[-1]
             if not evaluation:
-                self.sens = i_kh @ priors[:, -1, 1:]
+                self.sens = i_kh @ last[:, 1:]
                 if xc is not None:
                     self.sens[:, :p] -= gain @ xc[-1]
             start = stop
