@@ -670,8 +670,9 @@ class ScaleFactorEstimator:
     def _runs(self, epochs: _EpochArrays, regular: np.ndarray, st_present: np.ndarray) -> Any:
         """Yield ("gap", 0, missing), ("regular", start, stop), ("single", k, k + 1) or ("skip", k, k + 1).
 
-        A regular run is only started when the filter is at its steady state; the filter's state
-        is therefore inspected lazily, as the generator is consumed.
+        A regular run goes to :meth:`TwoStageFilter.run_regular` whether or not the filter is at its
+        steady state (after an irregular epoch the transient back to it is vectorised there too); the
+        filter's state is inspected lazily, as the generator is consumed.
 
         A segment starts at its first star-tracker epoch: before it the state is diffuse (the
         initial state is a GLS parameter), so epochs without a star-tracker measurement, and gaps,
@@ -692,7 +693,7 @@ class ScaleFactorEstimator:
                 missing = int(epochs.index[k] - epochs.index[k - 1] - 1)
                 if missing > 0:
                     yield ("gap", 0, missing)
-            if regular[k] and self.filter.steady:
+            if regular[k]:
                 stop = k + 1
                 while stop < count and regular[stop] and epochs.index[stop] == epochs.index[stop - 1] + 1:
                     stop += 1

@@ -53,6 +53,11 @@ __all__ = [
 ]
 
 _CHUNK = 4096  # samples per block of the bulk path (memory, not numerics)
+_TRANSIENT_CHUNK = 8192  # samples per vectorised piece of a transient (memory, not numerics)
+
+
+def _rows(array: np.ndarray | None, start: int, stop: int) -> np.ndarray | None:
+    return None if array is None else array[start:stop]
 #: largest |lambda|^-j inside one block of :func:`first_order_recursion` (bounds the rounding growth)
 _BLOCK_GROWTH = 100.0
 
@@ -618,7 +623,13 @@ class TwoStageFilter:
     def run_regular(self, y: ArrayLike, x_reg: ArrayLike | None = None, u0: ArrayLike | None = None,
                     u_reg: ArrayLike | None = None, want_states: bool = False,
                     want_innovations: bool = False) -> RegularRunOutput:
-        """Process L regular samples at the steady state in bulk (same result as L :meth:`step`).
+        """Process L regular samples in bulk (same result as L :meth:`step`).
+
+        At the steady state the closed loop is time invariant (modal recursions). After an
+        irregular sample the covariance is off its steady state: the first samples then go through
+        :meth:`_run_transient` (the exact time-varying gains in closed form and the time-varying
+        recursion by a parallel prefix scan, both vectorised) until the covariance is back at the
+        steady state within ``snap_tolerance``, exactly where :meth:`step` would snap.
 
         Parameters
         ----------
@@ -638,11 +649,171 @@ class TwoStageFilter:
         -------
         RegularRunOutput
         """
-        if not self.steady:
-            raise RuntimeError("run_regular needs the filter at its steady state")
+        m = self.model.m
+        y = np.asarray(y, dtype=np.float64).reshape(-1, m)
+        x_reg = None if x_reg is None else np.asarray(x_reg, dtype=np.float64)
+        u0 = None if u0 is None else np.asarray(u0, dtype=np.float64)
+        u_reg = None if u_reg is None else np.asarray(u_reg, dtype=np.float64)
+        parts: list[RegularRunOutput] = []
+        start = 0
+        while start < y.shape[0]:
+            if self.steady:
+                stop = y.shape[0]
+                parts.append(self._run_steady(y[start:], _rows(x_reg, start, stop), _rows(u0, start, stop),
+                                              _rows(u_reg, start, stop), want_states, want_innovations))
+            else:
+                stop = min(start + _TRANSIENT_CHUNK, y.shape[0])
+                taken = self._run_transient(y[start:stop], _rows(x_reg, start, stop), _rows(u0, start, stop),
+                                            _rows(u_reg, start, stop), want_states, want_innovations, parts)
+                stop = start + taken
+            start = stop
+        out = RegularRunOutput()
+        if self.evaluation and parts:
+            out.nis = np.concatenate([part.nis for part in parts if part.nis is not None])
+            if want_states:
+                out.states = np.concatenate([part.states for part in parts if part.states is not None])
+            if want_innovations:
+                out.innovations = np.concatenate([part.innovations for part in parts
+                                                  if part.innovations is not None])
+        return out
+
+    def _transient_covariances(self, p_first: np.ndarray, length: int) -> np.ndarray:
+        """Prior covariances P_k, k = 0..length-1, of regular samples after P_0 = ``p_first``.
+
+        With ``dP_k = P_k - P_ss`` (P_ss the steady-state prior), ``Abar = F (I - K_ss H)`` and
+        ``M = H^T Lambda_ss^-1 H``, the Riccati recursion is exactly
+        ``dP_{k+1} = Abar dP_k (I + M dP_k)^-1 Abar^T``, hence in closed form::
+
+            dP_k = Abar^k dP_0 (I + W_k dP_0)^-1 Abar^kT,   W_k = sum_{j<k} Abar^jT M Abar^j,
+
+        evaluated for all k at once in the modal coordinates of Abar (geometric sums).
+        """
+        mdl = self.model
+        n = mdl.n
+        closed = self.closed_loop
+        # Abar^k and W_k for k = 0..L-1 by doubling (log2 L stacked real products):
+        # Abar^(h+j) = Abar^j Abar^h, W_(h+j) = W_h + Abar^hT W_j Abar^h  (j < h)
+        a_k = np.empty((length, n, n))
+        w_k = np.empty((length, n, n))
+        a_k[0] = np.eye(n)
+        w_k[0] = 0.0
+        if length > 1:
+            a_k[1] = closed
+            w_k[1] = mdl.h.T @ self.lambda_inv_ss @ mdl.h
+        half = 2 if length > 2 else length
+        while half < length:
+            a_half = a_k[half // 2] @ a_k[half // 2]
+            w_half = w_k[half // 2] + a_k[half // 2].T @ w_k[half // 2] @ a_k[half // 2]
+            stop = min(2 * half, length)
+            count = stop - half
+            a_k[half:stop] = a_k[:count] @ a_half[None]
+            w_k[half:stop] = w_half[None] + a_half.T[None] @ w_k[:count] @ a_half[None]
+            half *= 2
+        d0 = p_first - self.p_prior_ss
+        d0 = 0.5 * (d0 + d0.T)
+        eye = np.eye(mdl.n)
+        # dP_0 (I + W_k dP_0)^-1 = [(I + dP_0 W_k)^-1 dP_0]^T  (dP_0, W_k symmetric)
+        inner = np.linalg.solve(eye[None] + d0[None] @ w_k, np.broadcast_to(d0, w_k.shape))
+        delta = a_k @ np.swapaxes(inner, 1, 2) @ np.swapaxes(a_k, 1, 2)
+        delta = 0.5 * (delta + np.swapaxes(delta, 1, 2))
+        return self.p_prior_ss[None] + delta
+
+    def _run_transient(self, y: np.ndarray, x_reg: np.ndarray | None, u0: np.ndarray | None,
+                       u_reg: np.ndarray | None, want_states: bool, want_innovations: bool,
+                       parts: list[RegularRunOutput]) -> int:
+        """Regular samples off the steady state, vectorised; returns how many were processed.
+
+        Stops after the sample whose posterior covariance is within ``snap_tolerance`` of the
+        steady state (the filter is then set to it, as :meth:`step` does), or at the end.
+        """
+        mdl = self.model
+        n, m, p = mdl.n, mdl.m, self.p
+        evaluation = self.evaluation
+        f, h, b, r = mdl.f, mdl.h, mdl.b, mdl.r
+        # prior of the first sample (a segment's first sample has no prediction)
+        if self.fresh:
+            p_first = self.cov
+            z_first = np.column_stack((self.x, self.sens)) if not evaluation else self.x[:, None].copy()
+        else:
+            p_first = f @ self.cov @ f.T + mdl.q
+            z_first = f @ (np.column_stack((self.x, self.sens)) if not evaluation else self.x[:, None])
+            if u0 is not None:
+                z_first[:, 0] += b @ u0[0]
+            if u_reg is not None and not evaluation:
+                z_first[:, 1:1 + p] += b @ u_reg[0]
+        priors = self._transient_covariances(p_first, y.shape[0])
+        # Lambda_k = H P_k H^T + R ; K_k = P_k H^T Lambda_k^-1 ; P+_k (Joseph)
+        lam = h[None] @ priors @ h.T[None] + r[None]
+        lam = 0.5 * (lam + np.swapaxes(lam, 1, 2))
+        lam_inv = np.linalg.inv(lam)
+        gains = priors @ h.T[None] @ lam_inv
+        i_kh = np.eye(n)[None] - gains @ h[None]
+        post = i_kh @ priors @ np.swapaxes(i_kh, 1, 2) + gains @ r[None] @ np.swapaxes(gains, 1, 2)
+        scale = np.max(np.abs(self.p_post_ss))
+        close = np.max(np.abs(post - self.p_post_ss[None]), axis=(1, 2)) <= self.snap_tolerance * scale
+        snapped = bool(np.any(close))
+        count = int(np.argmax(close)) + 1 if snapped else y.shape[0]
+        yc, gains, i_kh, lam_inv, post = y[:count], gains[:count], i_kh[:count], lam_inv[:count], post[:count]
+        xc = None if (x_reg is None or evaluation) else x_reg[:count]
+        # priors z_k = A_{k-1} z_{k-1} + D_k, A = F (I - K H), D_k = F K_{k-1} (y - X theta)_{k-1} + B (u0 + U theta)_k
+        cols = z_first.shape[1]
+        transition = f[None] @ i_kh[:-1]
+        fk = f[None] @ gains[:-1]
+        drive = np.zeros((count - 1, n, cols))
+        drive[:, :, 0] = np.einsum("kij,kj->ki", fk, yc[:-1])
+        if u0 is not None:
+            drive[:, :, 0] += u0[1:count] @ b.T
+        if not evaluation:
+            if xc is not None:
+                drive[:, :, 1:1 + p] -= fk @ xc[:-1]
+            if u_reg is not None:
+                drive[:, :, 1:1 + p] += b[None] @ u_reg[1:count]
+        # inclusive parallel prefix scan of the affine maps (Hillis-Steele): log2(count) vectorised passes
+        shift = 1
+        while shift < count - 1:
+            drive[shift:] = transition[shift:] @ drive[:-shift] + drive[shift:]
+            transition[shift:] = transition[shift:] @ transition[:-shift]
+            shift *= 2
+        z = np.empty((count, n, cols))
+        z[0] = z_first
+        z[1:] = transition @ z_first[None] + drive
+        states = z[:, :, 0]
+        e0 = yc - states @ h.T  # (count, m)
+        ew = np.einsum("kij,kj->ki", lam_inv, e0)
+        if evaluation:
+            part = RegularRunOutput(nis=np.einsum("ki,ki->k", e0, ew))
+            if want_states:
+                part.states = states + np.einsum("kij,kj->ki", gains, e0)
+            if want_innovations:
+                part.innovations = e0.copy()
+            parts.append(part)
+            self.x = states[-1] + gains[-1] @ e0[-1]
+        else:
+            s = h[None] @ z[:, :, 1:]  # (count, m, qt)
+            if xc is not None:
+                s[:, :, :p] += xc
+            sl = lam_inv @ s
+            self.info += s.reshape(count * m, -1).T @ sl.reshape(count * m, -1)
+            self.info = 0.5 * (self.info + self.info.T)
+            self.vector += np.einsum("kiq,ki->q", s, ew)
+            self.chi2 += float(np.sum(e0 * ew))
+            self.n_updates += count
+            self.dof_total += count * m
+            self.x = states[-1] + gains[-1] @ e0[-1]
+            self.sens = z[-1, :, 1:] - gains[-1] @ s[-1]
+        self.fresh = False
+        if snapped:
+            self.cov = self.p_post_ss.copy()
+            self.steady = True
+        else:
+            self.cov = 0.5 * (post[-1] + post[-1].T)
+        return count
+
+    def _run_steady(self, y: np.ndarray, x_reg: np.ndarray | None, u0: np.ndarray | None,
+                    u_reg: np.ndarray | None, want_states: bool, want_innovations: bool) -> RegularRunOutput:
+        """Regular samples at the steady state: time-invariant closed loop, modal recursions."""
         mdl = self.model
         n, m, p, qt = mdl.n, mdl.m, self.p, self.q_total
-        y = np.asarray(y, dtype=np.float64).reshape(-1, m)
         length = y.shape[0]
         out = RegularRunOutput()
         if length == 0:
