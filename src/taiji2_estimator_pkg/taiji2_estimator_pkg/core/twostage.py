@@ -89,7 +89,8 @@ def _block_scales(lam: complex, block: int) -> tuple[np.ndarray, np.ndarray]:
 _SCALES: dict[tuple[complex, int], tuple[np.ndarray, np.ndarray]] = {}
 
 
-def first_order_recursion(lam: complex, drive: np.ndarray, initial: np.ndarray) -> np.ndarray:
+def first_order_recursion(lam: complex, drive: np.ndarray, initial: np.ndarray,
+                          out: np.ndarray | None = None) -> np.ndarray:
     """``y_k = lam y_{k-1} + x_k`` for k = 0..L-1 with ``y_-1 = initial``, in bulk.
 
     The same as ``scipy.signal.lfilter([1], [1, -lam], x, axis=0, zi=lam * initial)``, evaluated
@@ -106,6 +107,8 @@ def first_order_recursion(lam: complex, drive: np.ndarray, initial: np.ndarray) 
         (L, ...) input x.
     initial : numpy.ndarray
         (...) state before the first sample.
+    out : numpy.ndarray, optional
+        (L, ...) array to write y into.
 
     Returns
     -------
@@ -140,7 +143,10 @@ def first_order_recursion(lam: complex, drive: np.ndarray, initial: np.ndarray) 
     # y = lam^(j+1) (c_b + running sum)
     work += carry[:, None]
     work *= forward.reshape(shape)
-    return flat[:length]
+    if out is None:
+        return flat[:length]
+    out[...] = flat[:length]
+    return out
 
 
 @dataclass(frozen=True)
@@ -841,14 +847,19 @@ class TwoStageFilter:
             xc = None if xr_all is None else xr_all[start:stop]
             # modal drive (n, count, cols) of w_k = lambda w_{k-1} + V^-1 D_k (index 0 unused), with
             # D_k = B (u0_k + U_k theta) + F K (y_{k-1} - X_{k-1} theta): built in modal coordinates
-            modal_drive = np.zeros((n, count, cols), dtype=dtype)
+            modal_drive = np.empty((n, count, cols), dtype=dtype)
+            modal_drive[:, 1:, 0] = v_fk @ yc[:-1].T
             if u0_all is not None:
-                modal_drive[:, :, 0] = v_b @ u0_all[start:stop].T
+                modal_drive[:, 1:, 0] += v_b @ u0_all[start + 1:stop].T
+            modal_drive[:, 1:, 1 + p:] = 0.0
+            # regressors measurement-major once per chunk: (m, count, p)
+            xt = None if xc is None else np.ascontiguousarray(np.moveaxis(xc, 1, 0))
+            if xt is not None:
+                modal_drive[:, 1:, 1:1 + p] = -(v_fk @ xt.reshape(m, -1)).reshape(n, count, p)[:, :-1]
+            else:
+                modal_drive[:, 1:, 1:1 + p] = 0.0
             if ur_all is not None:
-                modal_drive[:, :, 1:1 + p] = np.tensordot(v_b, ur_all[start:stop], axes=([1], [1]))
-            modal_drive[:, 1:, 0] += v_fk @ yc[:-1].T
-            if xc is not None:
-                modal_drive[:, 1:, 1:1 + p] -= np.tensordot(v_fk, xc[:-1], axes=([1], [1]))
+                modal_drive[:, 1:, 1:1 + p] += np.tensordot(v_b, ur_all[start + 1:stop], axes=([1], [1]))
             first = np.empty((n, cols))
             if self.fresh:
                 first[:, 0] = self.x
@@ -868,7 +879,7 @@ class TwoStageFilter:
             modal[:, 0, :] = w_first
             if count > 1:
                 for i in self._filtered_modes:
-                    modal[i, 1:, :] = first_order_recursion(modes[i], modal_drive[i, 1:], w_first[i])
+                    first_order_recursion(modes[i], modal_drive[i, 1:], w_first[i], out=modal[i, 1:])
                 for i, j in self._conjugate_partner.items():
                     modal[i, 1:, :] = np.conj(modal[j, 1:, :])
             # prior states x^_k = V w_k (data column) and innovations e0 = y - H x^
@@ -889,8 +900,8 @@ class TwoStageFilter:
                 sw = np.tensordot(w_hv, modal[:, :, 1:], axes=([1], [0]))  # (m, count, qt)
                 if dtype is complex:
                     sw = sw.real.copy()
-                if xc is not None:
-                    sw[:, :, :p] += np.tensordot(whiten_t, xc, axes=([1], [1]))
+                if xt is not None:
+                    sw[:, :, :p] += (whiten_t @ xt.reshape(m, -1)).reshape(m, count, p)
                 sw = sw.reshape(m * count, qt)
                 ew = (whiten_t @ e0).reshape(-1)
                 self.info += sw.T @ sw
