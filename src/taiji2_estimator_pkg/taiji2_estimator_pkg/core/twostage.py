@@ -692,7 +692,7 @@ class TwoStageFilter:
 
             dP_k = Abar^k dP_0 (I + W_k dP_0)^-1 Abar^kT,   W_k = sum_{j<k} Abar^jT M Abar^j,
 
-        evaluated for all k at once in the modal coordinates of Abar (geometric sums).
+        evaluated for all k at once (powers and sums by doubling, then one stacked solve).
         """
         mdl = self.model
         n = mdl.n
