@@ -56,6 +56,40 @@ _CHUNK = 4096  # samples per block of the bulk path (memory, not numerics)
 _TRANSIENT_CHUNK = 8192  # samples per vectorised piece of a transient (memory, not numerics)
 
 
+def _affine_recursion(transition: np.ndarray, drive: np.ndarray, initial: np.ndarray) -> np.ndarray:
+    """``z_i = T_i z_{i-1} + D_i`` (i = 0..N-1, ``z_-1 = initial``) for time-varying T, in blocks.
+
+    The N steps are cut into ~sqrt(N) blocks of ~sqrt(N) steps: the recursion inside every block
+    (from a zero state) and the block's transition product run as one stacked product per step
+    position, vectorised over the blocks; the states carried from block to block follow in a short
+    loop over the blocks; then ``z = Phi c + local`` for all steps at once. About 2 sqrt(N)
+    vectorised operations instead of N per-step ones.
+    """
+    steps, n = transition.shape[0], transition.shape[1]
+    if steps == 0:
+        return np.zeros((0, *initial.shape))
+    block = max(1, int(np.sqrt(steps)))
+    n_blocks = -(-steps // block)
+    pad = n_blocks * block - steps
+    t = np.concatenate((transition, np.broadcast_to(np.eye(n), (pad, n, n)))) if pad else transition
+    d = np.concatenate((drive, np.zeros((pad, *drive.shape[1:])))) if pad else drive
+    t = t.reshape(n_blocks, block, n, n)
+    d = d.reshape(n_blocks, block, *drive.shape[1:])
+    local = np.empty_like(d)
+    phi = np.empty_like(t)
+    local[:, 0] = d[:, 0]
+    phi[:, 0] = t[:, 0]
+    for j in range(1, block):
+        local[:, j] = t[:, j] @ local[:, j - 1] + d[:, j]
+        phi[:, j] = t[:, j] @ phi[:, j - 1]
+    carry = np.empty((n_blocks, *initial.shape))
+    carry[0] = initial
+    for b in range(1, n_blocks):
+        carry[b] = phi[b - 1, -1] @ carry[b - 1] + local[b - 1, -1]
+    out = phi @ carry[:, None] + local
+    return out.reshape(n_blocks * block, *drive.shape[1:])[:steps]
+
+
 def _rows(array: np.ndarray | None, start: int, stop: int) -> np.ndarray | None:
     return None if array is None else array[start:stop]
 #: largest |lambda|^-j inside one block of :func:`first_order_recursion` (bounds the rounding growth)
@@ -774,15 +808,9 @@ class TwoStageFilter:
                 drive[:, :, 1:1 + p] -= fk @ xc[:-1]
             if u_reg is not None:
                 drive[:, :, 1:1 + p] += b[None] @ u_reg[1:count]
-        # inclusive parallel prefix scan of the affine maps (Hillis-Steele): log2(count) vectorised passes
-        shift = 1
-        while shift < count - 1:
-            drive[shift:] = transition[shift:] @ drive[:-shift] + drive[shift:]
-            transition[shift:] = transition[shift:] @ transition[:-shift]
-            shift *= 2
         z = np.empty((count, n, cols))
         z[0] = z_first
-        z[1:] = transition @ z_first[None] + drive
+        z[1:] = _affine_recursion(transition, drive, z_first)
         states = z[:, :, 0]
         e0 = yc - states @ h.T  # (count, m)
         ew = np.einsum("kij,kj->ki", lam_inv, e0)
