@@ -15,11 +15,6 @@ import json
 import sys
 import time
 
-from taiji2_estimator_pkg.calibration import align_streams, calibrate
-from taiji2_estimator_pkg.core.instrument import InstrumentModel
-from taiji2_estimator_pkg.io import load_raw_bag
-from taiji2_estimator_pkg.report import format_table
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="ROS 2 bag directory (MCAP or sqlite3)")
@@ -32,6 +27,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     started = time.perf_counter()
+    from taiji2_estimator_pkg.calibration import align_streams, calibrate
+    from taiji2_estimator_pkg.core.instrument import InstrumentModel
+    from taiji2_estimator_pkg.io import load_raw_bag
+    from taiji2_estimator_pkg.report import format_table
+
     raw = load_raw_bag(args.bag)
     instrument = InstrumentModel.from_layout(args.config or args.layout)
     grs = {gid: (raw.grs(gid).stamp_ns, raw.grs(gid).voltages_v) for gid in (1, 2)}

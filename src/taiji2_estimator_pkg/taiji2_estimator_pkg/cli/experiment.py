@@ -19,9 +19,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-from taiji2_estimator_pkg.report import EstimateTable, format_table
-from taiji2_runtime.ros import messages, rclpy
-
 _NS = 1_000_000_000
 
 
@@ -43,6 +40,8 @@ class _Monitor:
     """Keeps the latest estimate and truth of every GRS, and the diagnostics."""
 
     def __init__(self, node: Any) -> None:
+        from taiji2_runtime.ros import messages, rclpy
+
         t = messages.taiji2_msgs
         qos = rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL)
         self.latest: dict[str, Any] = {}
@@ -85,6 +84,9 @@ def _stop(procs: list[subprocess.Popen]) -> None:
 
 def main(args: argparse.Namespace) -> int:
     import tempfile
+
+    from taiji2_estimator_pkg.report import EstimateTable, format_table
+    from taiji2_runtime.ros import rclpy
 
     out = Path(args.out or tempfile.mkdtemp(prefix="taiji2-experiment-"))
     out.mkdir(parents=True, exist_ok=True)

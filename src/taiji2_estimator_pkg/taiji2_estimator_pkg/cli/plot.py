@@ -6,13 +6,6 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from taiji2_estimator_pkg import plots
-from taiji2_estimator_pkg.core.instrument import InstrumentModel
-from taiji2_sim_pkg.core.config import load_config
-from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--layout", default="type1", help="built-in layout: type1 | type2 (default type1)")
@@ -23,6 +16,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from taiji2_estimator_pkg import plots
+    from taiji2_estimator_pkg.core.instrument import InstrumentModel
+    from taiji2_sim_pkg.core.config import load_config
+    from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
+
     overrides = {"noise.thruster_force.enabled": args.thruster_force_noise == "on"}
     config = load_config(args.layout, overrides={"maneuver.duration_s": args.duration_s, **overrides})
     out_dir = Path(args.out)

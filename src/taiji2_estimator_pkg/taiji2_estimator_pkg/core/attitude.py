@@ -42,7 +42,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.signal import savgol_coeffs
 
 __all__ = [
     "AttitudeIntegrator",
@@ -238,10 +237,14 @@ class SmoothingDerivative:
 
     def rate_kernel(self) -> np.ndarray:
         """(2m + 1,) weights on phi_{k-m..k+m} giving omega_k [s^-1]."""
+        from scipy.signal import savgol_coeffs  # the paper's method only
+
         return savgol_coeffs(self.window, self.polyorder, deriv=1, delta=self.dt_s, use="dot")
 
     def acceleration_kernel(self) -> np.ndarray:
         """(2m + 1,) weights on phi_{k-m..k+m} giving omega_dot_k [s^-2]."""
+        from scipy.signal import savgol_coeffs  # the paper's method only
+
         return savgol_coeffs(self.window, self.polyorder, deriv=2, delta=self.dt_s, use="dot")
 
     def grs_kernel(self) -> np.ndarray:

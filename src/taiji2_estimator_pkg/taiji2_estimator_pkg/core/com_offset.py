@@ -773,7 +773,7 @@ class ComOffsetEstimator:
             if k > 0:
                 for _ in range(int(epochs.index[k] - epochs.index[k - 1] - 1)):
                     self.filter.step(None)
-            if full[k] and self.filter.steady:
+            if full[k]:  # a run of regular epochs (run_regular also takes the transient after an irregular one)
                 stop = k + 1
                 while stop < count and full[stop] and epochs.index[stop] == epochs.index[stop - 1] + 1:
                     stop += 1

@@ -17,12 +17,12 @@ right) and can gate it.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.stats import chi2
 
 __all__ = ["KalmanFilter", "UpdateResult", "chi2_gate"]
 
@@ -42,7 +42,43 @@ def chi2_gate(dof: int, probability: float) -> float:
     float
         Threshold on the NIS.
     """
-    return float(chi2.isf(probability, dof))
+    # Q(x) = P(chi2_dof > x) is decreasing: bisection on [0, hi] to the last bit (equals
+    # scipy.stats.chi2.isf to rounding; computed here because importing scipy.stats costs more
+    # than a whole offline calibration)
+    if not 0.0 < probability < 1.0 or dof < 1:
+        raise ValueError(f"chi2_gate: need dof >= 1 and 0 < probability < 1, got {dof}, {probability}")
+    lo, hi = 0.0, float(dof) + 10.0
+    while chi2_survival(hi, dof) > probability:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid in (lo, hi):
+            break
+        if chi2_survival(mid, dof) > probability:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def chi2_survival(x: float, dof: int) -> float:
+    """``P(chi2_dof > x)``: the regularised upper incomplete gamma function ``Q(dof/2, x/2)``.
+
+    Closed forms for integer and half-integer ``a = dof/2``::
+
+        Q(a, y) = exp(-y) sum_{k<a} y^k / k!                                  (a integer)
+        Q(a, y) = erfc(sqrt y) + exp(-y) sum_{k=1}^{a-1/2} y^(k-1/2) / Gamma(k+1/2)   (a half-integer)
+    """
+    y = 0.5 * float(x)
+    if y <= 0.0:
+        return 1.0
+    if dof % 2 == 0:
+        terms = [k * math.log(y) - y - math.lgamma(k + 1.0) for k in range(dof // 2)]
+        head = 0.0
+    else:
+        terms = [(k - 0.5) * math.log(y) - y - math.lgamma(k + 0.5) for k in range(1, (dof - 1) // 2 + 1)]
+        head = math.erfc(math.sqrt(y))
+    return head + math.fsum(math.exp(t) for t in terms)
 
 
 @dataclass(frozen=True)

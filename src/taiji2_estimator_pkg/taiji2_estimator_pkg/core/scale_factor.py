@@ -590,6 +590,7 @@ class ScaleFactorEstimator:
         initial = copy.deepcopy(self.filter)
         gated_st = np.zeros(epochs.count, dtype=bool)
         gated_pair = np.zeros(epochs.count, dtype=bool)
+        states = None  # filtered states of the last evaluation pass, if it used the final estimate
         for attempt in range(2):
             self.filter = copy.deepcopy(initial)
             self.diff_moment = np.zeros_like(self.diff_moment)
@@ -602,18 +603,20 @@ class ScaleFactorEstimator:
             theta, _, ok = self._solve()
             if self.gate is None or attempt == 1 or not ok:
                 break
-            nis_st, nis_pair, _ = self._evaluate(initial, epochs, gated_st, gated_pair, theta)
+            nis_st, nis_pair, states = self._evaluate(initial, epochs, gated_st, gated_pair, theta)
             new_st = (nis_st > self.gate) & ~gated_st
             new_pair = (nis_pair > self.gate) & ~gated_pair
             if not (np.any(new_st) or np.any(new_pair)):
-                break
+                break  # nothing newly gated: theta is final and ``states`` were evaluated with it
+            states = None
             gated_st |= new_st
             gated_pair |= new_pair
         self.filter.n_rejected = int(np.count_nonzero(gated_st))
         self.n_gated_grs = int(np.count_nonzero(gated_pair))
         theta, _, ok = self._solve()
         if want_rates and ok:
-            _, _, states = self._evaluate(initial, epochs, gated_st, gated_pair, theta)
+            if states is None:
+                _, _, states = self._evaluate(initial, epochs, gated_st, gated_pair, theta)
             self.rates = states[:, 3:] @ self.model.from_model.T
             self.rate_times = epochs.t.copy()
         if epochs.count:
@@ -641,7 +644,9 @@ class ScaleFactorEstimator:
                 self.diff_moment += np.einsum("kji,jl,klm->im", d_rows, model.w_diff, d_rows)
                 self.n_diff += int(np.count_nonzero(both))
         y_all = epochs.phi @ model.to_model.T
-        for kind, start, stop in self._runs(epochs, regular):
+        for kind, start, stop in self._runs(epochs, regular, st_present):
+            if kind == "skip":
+                continue
             if kind == "gap":
                 self._bridge(stop)
             elif kind == "regular":
@@ -662,20 +667,33 @@ class ScaleFactorEstimator:
                     self.st_correction_sum += self.st_correction[present]
         self._cache = None
 
-    def _runs(self, epochs: _EpochArrays, regular: np.ndarray) -> Any:
-        """Yield ("gap", 0, missing), ("regular", start, stop) or ("single", k, k + 1) in time order.
+    def _runs(self, epochs: _EpochArrays, regular: np.ndarray, st_present: np.ndarray) -> Any:
+        """Yield ("gap", 0, missing), ("regular", start, stop), ("single", k, k + 1) or ("skip", k, k + 1).
 
-        A regular run is only started when the filter is at its steady state; the filter's state
-        is therefore inspected lazily, as the generator is consumed.
+        A regular run goes to :meth:`TwoStageFilter.run_regular` whether or not the filter is at its
+        steady state (after an irregular epoch the transient back to it is vectorised there too); the
+        filter's state is inspected lazily, as the generator is consumed.
+
+        A segment starts at its first star-tracker epoch: before it the state is diffuse (the
+        initial state is a GLS parameter), so epochs without a star-tracker measurement, and gaps,
+        carry no information on G (any input there is absorbed by the diffuse state) and are
+        skipped. Processing them would leave the covariance off its steady state (a prediction
+        without update) and send thousands of epochs down the per-sample path until the Riccati
+        recursion converges back (the case of a bag whose first GRS sample precedes the first
+        star-tracker sample, e.g. a writer stamping a GRS sample with the start of its step).
         """
         k = 0
         count = epochs.count
         while k < count:
-            if k > 0:
+            if self.filter.fresh and not st_present[k]:
+                yield ("skip", k, k + 1)
+                k += 1
+                continue
+            if k > 0 and not self.filter.fresh:
                 missing = int(epochs.index[k] - epochs.index[k - 1] - 1)
                 if missing > 0:
                     yield ("gap", 0, missing)
-            if regular[k] and self.filter.steady:
+            if regular[k]:
                 stop = k + 1
                 while stop < count and regular[stop] and epochs.index[stop] == epochs.index[stop - 1] + 1:
                     stop += 1
@@ -700,8 +718,11 @@ class ScaleFactorEstimator:
         nis_st = np.zeros(epochs.count)
         states = np.zeros((epochs.count, 6))
         y_all = epochs.phi @ model.to_model.T
-        for kind, start, stop in self._runs(epochs, regular):
-            if kind == "gap":
+        skipped: list[int] = []
+        for kind, start, stop in self._runs(epochs, regular, st_present):
+            if kind == "skip":
+                skipped.append(start)
+            elif kind == "gap":
                 self._bridge(stop)
                 if self.filter.fresh:  # a reset: the next segment's initial state
                     segment += 1
@@ -727,6 +748,14 @@ class ScaleFactorEstimator:
                 if st_present[k]:
                     nis_st[k] = result.post_nis
         self.filter = saved
+        # epochs before a segment's first star-tracker epoch: the state propagated back from it,
+        # x_{k-1} = F^-1 (x_k - B a_k), a_k the GRS acceleration at the final estimate
+        f_inv = np.linalg.inv(model.f)
+        for k in reversed(skipped):
+            if k + 1 < epochs.count and epochs.index[k + 1] == epochs.index[k] + 1:
+                present = tuple(g for j, g in enumerate(self.grs_ids) if grs_present[k + 1, j])
+                diffs = {g: epochs.diffs[k + 1, j] for j, g in enumerate(self.grs_ids)}
+                states[k] = f_inv @ (states[k + 1] - model.b @ (model.input_regressor(diffs, present) @ g_hat))
         nis_pair = np.zeros(epochs.count)
         if len(self.grs_ids) == 2:
             both = np.all(epochs.grs_ok, axis=1)

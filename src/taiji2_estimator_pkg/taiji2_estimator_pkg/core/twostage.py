@@ -28,8 +28,9 @@ Two evaluation paths give the same numbers (to rounding):
   ``snap_tolerance`` (then it is set to it exactly);
 - :meth:`TwoStageFilter.run_regular`: a run of regular samples at the steady state in bulk: the
   closed loop ``A = F (I - K H)`` is diagonalised block by block (the model supplies coordinates
-  in which it is block diagonal) and each mode is a first-order recursion evaluated by
-  :func:`scipy.signal.lfilter`.
+  in which it is block diagonal) and each mode is a first-order recursion evaluated in bulk by
+  :func:`first_order_recursion` (blocked scaled prefix sums: numpy only, so that importing the
+  estimators does not import scipy.signal, which costs more than a whole calibration's filtering).
 """
 
 from __future__ import annotations
@@ -40,19 +41,146 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.linalg import solve_discrete_are
-from scipy.signal import lfilter
 
 __all__ = [
     "RegularRunOutput",
     "StateSpaceModel",
     "StepInfo",
     "TwoStageFilter",
+    "first_order_recursion",
     "solve_information",
     "steady_state_prior_covariance",
 ]
 
 _CHUNK = 4096  # samples per block of the bulk path (memory, not numerics)
+_TRANSIENT_CHUNK = 8192  # samples per vectorised piece of a transient (memory, not numerics)
+
+
+def _affine_recursion(transition: np.ndarray, drive: np.ndarray, initial: np.ndarray) -> np.ndarray:
+    """``z_i = T_i z_{i-1} + D_i`` (i = 0..N-1, ``z_-1 = initial``) for time-varying T, in blocks.
+
+    The N steps are cut into ~sqrt(N) blocks of ~sqrt(N) steps: the recursion inside every block
+    (from a zero state) and the block's transition product run as one stacked product per step
+    position, vectorised over the blocks; the states carried from block to block follow in a short
+    loop over the blocks; then ``z = Phi c + local`` for all steps at once. About 2 sqrt(N)
+    vectorised operations instead of N per-step ones.
+    """
+    steps, n = transition.shape[0], transition.shape[1]
+    if steps == 0:
+        return np.zeros((0, *initial.shape))
+    block = max(1, int(np.sqrt(steps)))
+    n_blocks = -(-steps // block)
+    pad = n_blocks * block - steps
+    t = np.concatenate((transition, np.broadcast_to(np.eye(n), (pad, n, n)))) if pad else transition
+    d = np.concatenate((drive, np.zeros((pad, *drive.shape[1:])))) if pad else drive
+    t = t.reshape(n_blocks, block, n, n)
+    d = d.reshape(n_blocks, block, *drive.shape[1:])
+    local = np.empty_like(d)
+    phi = np.empty_like(t)
+    local[:, 0] = d[:, 0]
+    phi[:, 0] = t[:, 0]
+    for j in range(1, block):
+        local[:, j] = t[:, j] @ local[:, j - 1] + d[:, j]
+        phi[:, j] = t[:, j] @ phi[:, j - 1]
+    carry = np.empty((n_blocks, *initial.shape))
+    carry[0] = initial
+    for b in range(1, n_blocks):
+        carry[b] = phi[b - 1, -1] @ carry[b - 1] + local[b - 1, -1]
+    out = phi @ carry[:, None] + local
+    return out.reshape(n_blocks * block, *drive.shape[1:])[:steps]
+
+
+def _rows(array: np.ndarray | None, start: int, stop: int) -> np.ndarray | None:
+    return None if array is None else array[start:stop]
+#: largest |lambda|^-j inside one block of :func:`first_order_recursion` (bounds the rounding growth)
+_BLOCK_GROWTH = 100.0
+
+
+def _doubling_recursion(mu: complex, drive: np.ndarray) -> np.ndarray:
+    """``y_k = mu y_{k-1} + x_k`` (``y_-1 = 0``) by recursive doubling (log2 passes; |mu| small)."""
+    y = drive.copy()
+    shift, power = 1, mu
+    # after the pass with shift s, y_k = sum_{i < 2s} mu^i x_{k-i}: stop once mu^s is below rounding
+    while shift < y.shape[0] and abs(power) > 1e-18:
+        y[shift:] = y[shift:] + power * y[:-shift]
+        shift, power = 2 * shift, power * power
+    return y
+
+
+def _block_scales(lam: complex, block: int) -> tuple[np.ndarray, np.ndarray]:
+    """``lam^-j`` and ``lam^(j+1)`` for j = 0..block-1 (cached: a filter has few modes)."""
+    key = (complex(lam), block)
+    cached = _SCALES.get(key)
+    if cached is None:
+        powers = np.arange(block, dtype=np.float64)
+        cached = (lam ** -powers, lam ** (powers + 1.0))
+        if len(_SCALES) > 64:
+            _SCALES.clear()
+        _SCALES[key] = cached
+    return cached
+
+
+_SCALES: dict[tuple[complex, int], tuple[np.ndarray, np.ndarray]] = {}
+
+
+def first_order_recursion(lam: complex, drive: np.ndarray, initial: np.ndarray,
+                          out: np.ndarray | None = None) -> np.ndarray:
+    """``y_k = lam y_{k-1} + x_k`` for k = 0..L-1 with ``y_-1 = initial``, in bulk.
+
+    The same as ``scipy.signal.lfilter([1], [1, -lam], x, axis=0, zi=lam * initial)``, evaluated
+    without a Python loop over samples: the record is cut into blocks of B samples with
+    ``|lam|^-B <= 100``; inside a block ``y_{s+j} = lam^(j+1) (y_{s-1} + sum_{i<=j} lam^-(i+1) x_{s+i})``
+    (a scaled cumulative sum), and the values carried from block to block obey the same recursion
+    with ``lam^B`` (small), solved by recursive doubling. Rounding grows by at most ~100 eps.
+
+    Parameters
+    ----------
+    lam : complex or float
+        Pole, ``|lam| <= 1``.
+    drive : numpy.ndarray
+        (L, ...) input x.
+    initial : numpy.ndarray
+        (...) state before the first sample.
+    out : numpy.ndarray, optional
+        (L, ...) array to write y into.
+
+    Returns
+    -------
+    numpy.ndarray
+        (L, ...) y, complex if ``lam`` or the input is.
+    """
+    length = drive.shape[0]
+    dtype = np.result_type(drive.dtype, np.asarray(initial).dtype, type(lam))
+    if length == 0:
+        return np.zeros(drive.shape, dtype=dtype)
+    magnitude = abs(lam)
+    if magnitude == 0.0:
+        return drive.astype(dtype, copy=True)
+    decay = -np.log(magnitude) if magnitude < 1.0 else 0.0
+    block = length if decay == 0.0 else int(max(1, min(length, np.log(_BLOCK_GROWTH) // decay)))
+    tail = drive.shape[1:]
+    n_blocks = -(-length // block)
+    inverse, forward = _block_scales(lam, block)
+    shape = (1, block) + (1,) * len(tail)
+    work = np.empty((n_blocks, block, *tail), dtype=dtype)
+    flat = work.reshape(n_blocks * block, *tail)
+    # z = lam^-(j+1) x (scaled input), then its running sum inside each block
+    np.multiply(drive, np.tile(inverse / lam, n_blocks)[:length].reshape((length,) + (1,) * len(tail)),
+                out=flat[:length])
+    flat[length:] = 0.0
+    np.cumsum(work, axis=1, out=work)
+    # carried state c_b = y at the end of block b-1: c_b = lam^B c_{b-1} + lam^B * running sum_{b-1, last}
+    carry_drive = np.empty((n_blocks, *tail), dtype=dtype)
+    carry_drive[0] = np.asarray(initial, dtype=dtype)
+    carry_drive[1:] = forward[-1] * work[:-1, -1]
+    carry = _doubling_recursion(lam ** block, carry_drive)
+    # y = lam^(j+1) (c_b + running sum)
+    work += carry[:, None]
+    work *= forward.reshape(shape)
+    if out is None:
+        return flat[:length]
+    out[...] = flat[:length]
+    return out
 
 
 @dataclass(frozen=True)
@@ -171,6 +299,8 @@ def steady_state_prior_covariance(f: np.ndarray, h: np.ndarray, q: np.ndarray, r
         h_k = h_next
         if change <= 1e-15 * np.max(np.abs(h_k)) and np.max(np.abs(a_k)) < 1e-8:
             return h_k
+    from scipy.linalg import solve_discrete_are  # fallback only (rarely reached; a slow import)
+
     return solve_discrete_are(f.T, h.T, q, r)
 
 
@@ -533,7 +663,13 @@ class TwoStageFilter:
     def run_regular(self, y: ArrayLike, x_reg: ArrayLike | None = None, u0: ArrayLike | None = None,
                     u_reg: ArrayLike | None = None, want_states: bool = False,
                     want_innovations: bool = False) -> RegularRunOutput:
-        """Process L regular samples at the steady state in bulk (same result as L :meth:`step`).
+        """Process L regular samples in bulk (same result as L :meth:`step`).
+
+        At the steady state the closed loop is time invariant (modal recursions). After an
+        irregular sample the covariance is off its steady state: the first samples then go through
+        :meth:`_run_transient` (the exact time-varying gains in closed form and the time-varying
+        recursion by a parallel prefix scan, both vectorised) until the covariance is back at the
+        steady state within ``snap_tolerance``, exactly where :meth:`step` would snap.
 
         Parameters
         ----------
@@ -553,11 +689,165 @@ class TwoStageFilter:
         -------
         RegularRunOutput
         """
-        if not self.steady:
-            raise RuntimeError("run_regular needs the filter at its steady state")
+        m = self.model.m
+        y = np.asarray(y, dtype=np.float64).reshape(-1, m)
+        x_reg = None if x_reg is None else np.asarray(x_reg, dtype=np.float64)
+        u0 = None if u0 is None else np.asarray(u0, dtype=np.float64)
+        u_reg = None if u_reg is None else np.asarray(u_reg, dtype=np.float64)
+        parts: list[RegularRunOutput] = []
+        start = 0
+        while start < y.shape[0]:
+            if self.steady:
+                stop = y.shape[0]
+                parts.append(self._run_steady(y[start:], _rows(x_reg, start, stop), _rows(u0, start, stop),
+                                              _rows(u_reg, start, stop), want_states, want_innovations))
+            else:
+                stop = min(start + _TRANSIENT_CHUNK, y.shape[0])
+                taken = self._run_transient(y[start:stop], _rows(x_reg, start, stop), _rows(u0, start, stop),
+                                            _rows(u_reg, start, stop), want_states, want_innovations, parts)
+                stop = start + taken
+            start = stop
+        out = RegularRunOutput()
+        if self.evaluation and parts:
+            out.nis = np.concatenate([part.nis for part in parts if part.nis is not None])
+            if want_states:
+                out.states = np.concatenate([part.states for part in parts if part.states is not None])
+            if want_innovations:
+                out.innovations = np.concatenate([part.innovations for part in parts
+                                                  if part.innovations is not None])
+        return out
+
+    def _transient_covariances(self, p_first: np.ndarray, length: int) -> np.ndarray:
+        """Prior covariances P_k, k = 0..length-1, of regular samples after P_0 = ``p_first``.
+
+        With ``dP_k = P_k - P_ss`` (P_ss the steady-state prior), ``Abar = F (I - K_ss H)`` and
+        ``M = H^T Lambda_ss^-1 H``, the Riccati recursion is exactly
+        ``dP_{k+1} = Abar dP_k (I + M dP_k)^-1 Abar^T``, hence in closed form::
+
+            dP_k = Abar^k dP_0 (I + W_k dP_0)^-1 Abar^kT,   W_k = sum_{j<k} Abar^jT M Abar^j,
+
+        evaluated for all k at once (powers and sums by doubling, then one stacked solve).
+        """
+        mdl = self.model
+        n = mdl.n
+        closed = self.closed_loop
+        # Abar^k and W_k for k = 0..L-1 by doubling (log2 L stacked real products):
+        # Abar^(h+j) = Abar^j Abar^h, W_(h+j) = W_h + Abar^hT W_j Abar^h  (j < h)
+        a_k = np.empty((length, n, n))
+        w_k = np.empty((length, n, n))
+        a_k[0] = np.eye(n)
+        w_k[0] = 0.0
+        if length > 1:
+            a_k[1] = closed
+            w_k[1] = mdl.h.T @ self.lambda_inv_ss @ mdl.h
+        half = 2 if length > 2 else length
+        while half < length:
+            a_half = a_k[half // 2] @ a_k[half // 2]
+            w_half = w_k[half // 2] + a_k[half // 2].T @ w_k[half // 2] @ a_k[half // 2]
+            stop = min(2 * half, length)
+            count = stop - half
+            a_k[half:stop] = a_k[:count] @ a_half[None]
+            w_k[half:stop] = w_half[None] + a_half.T[None] @ w_k[:count] @ a_half[None]
+            half *= 2
+        d0 = p_first - self.p_prior_ss
+        d0 = 0.5 * (d0 + d0.T)
+        eye = np.eye(mdl.n)
+        # dP_0 (I + W_k dP_0)^-1 = [(I + dP_0 W_k)^-1 dP_0]^T  (dP_0, W_k symmetric)
+        inner = np.linalg.solve(eye[None] + d0[None] @ w_k, np.broadcast_to(d0, w_k.shape))
+        delta = a_k @ np.swapaxes(inner, 1, 2) @ np.swapaxes(a_k, 1, 2)
+        delta = 0.5 * (delta + np.swapaxes(delta, 1, 2))
+        return self.p_prior_ss[None] + delta
+
+    def _run_transient(self, y: np.ndarray, x_reg: np.ndarray | None, u0: np.ndarray | None,
+                       u_reg: np.ndarray | None, want_states: bool, want_innovations: bool,
+                       parts: list[RegularRunOutput]) -> int:
+        """Regular samples off the steady state, vectorised; returns how many were processed.
+
+        Stops after the sample whose posterior covariance is within ``snap_tolerance`` of the
+        steady state (the filter is then set to it, as :meth:`step` does), or at the end.
+        """
+        mdl = self.model
+        n, m, p = mdl.n, mdl.m, self.p
+        evaluation = self.evaluation
+        f, h, b, r = mdl.f, mdl.h, mdl.b, mdl.r
+        # prior of the first sample (a segment's first sample has no prediction)
+        if self.fresh:
+            p_first = self.cov
+            z_first = np.column_stack((self.x, self.sens)) if not evaluation else self.x[:, None].copy()
+        else:
+            p_first = f @ self.cov @ f.T + mdl.q
+            z_first = f @ (np.column_stack((self.x, self.sens)) if not evaluation else self.x[:, None])
+            if u0 is not None:
+                z_first[:, 0] += b @ u0[0]
+            if u_reg is not None and not evaluation:
+                z_first[:, 1:1 + p] += b @ u_reg[0]
+        priors = self._transient_covariances(p_first, y.shape[0])
+        # Lambda_k = H P_k H^T + R ; K_k = P_k H^T Lambda_k^-1 ; P+_k (Joseph)
+        lam = h[None] @ priors @ h.T[None] + r[None]
+        lam = 0.5 * (lam + np.swapaxes(lam, 1, 2))
+        lam_inv = np.linalg.inv(lam)
+        gains = priors @ h.T[None] @ lam_inv
+        i_kh = np.eye(n)[None] - gains @ h[None]
+        post = i_kh @ priors @ np.swapaxes(i_kh, 1, 2) + gains @ r[None] @ np.swapaxes(gains, 1, 2)
+        scale = np.max(np.abs(self.p_post_ss))
+        close = np.max(np.abs(post - self.p_post_ss[None]), axis=(1, 2)) <= self.snap_tolerance * scale
+        snapped = bool(np.any(close))
+        count = int(np.argmax(close)) + 1 if snapped else y.shape[0]
+        yc, gains, i_kh, lam_inv, post = y[:count], gains[:count], i_kh[:count], lam_inv[:count], post[:count]
+        xc = None if (x_reg is None or evaluation) else x_reg[:count]
+        # priors z_k = A_{k-1} z_{k-1} + D_k, A = F (I - K H), D_k = F K_{k-1} (y - X theta)_{k-1} + B (u0 + U theta)_k
+        cols = z_first.shape[1]
+        transition = f[None] @ i_kh[:-1]
+        fk = f[None] @ gains[:-1]
+        drive = np.zeros((count - 1, n, cols))
+        drive[:, :, 0] = np.einsum("kij,kj->ki", fk, yc[:-1])
+        if u0 is not None:
+            drive[:, :, 0] += u0[1:count] @ b.T
+        if not evaluation:
+            if xc is not None:
+                drive[:, :, 1:1 + p] -= fk @ xc[:-1]
+            if u_reg is not None:
+                drive[:, :, 1:1 + p] += b[None] @ u_reg[1:count]
+        z = np.empty((count, n, cols))
+        z[0] = z_first
+        z[1:] = _affine_recursion(transition, drive, z_first)
+        states = z[:, :, 0]
+        e0 = yc - states @ h.T  # (count, m)
+        ew = np.einsum("kij,kj->ki", lam_inv, e0)
+        if evaluation:
+            part = RegularRunOutput(nis=np.einsum("ki,ki->k", e0, ew))
+            if want_states:
+                part.states = states + np.einsum("kij,kj->ki", gains, e0)
+            if want_innovations:
+                part.innovations = e0.copy()
+            parts.append(part)
+            self.x = states[-1] + gains[-1] @ e0[-1]
+        else:
+            s = h[None] @ z[:, :, 1:]  # (count, m, qt)
+            if xc is not None:
+                s[:, :, :p] += xc
+            sl = lam_inv @ s
+            self.info += s.reshape(count * m, -1).T @ sl.reshape(count * m, -1)
+            self.info = 0.5 * (self.info + self.info.T)
+            self.vector += np.einsum("kiq,ki->q", s, ew)
+            self.chi2 += float(np.sum(e0 * ew))
+            self.n_updates += count
+            self.dof_total += count * m
+            self.x = states[-1] + gains[-1] @ e0[-1]
+            self.sens = z[-1, :, 1:] - gains[-1] @ s[-1]
+        self.fresh = False
+        if snapped:
+            self.cov = self.p_post_ss.copy()
+            self.steady = True
+        else:
+            self.cov = 0.5 * (post[-1] + post[-1].T)
+        return count
+
+    def _run_steady(self, y: np.ndarray, x_reg: np.ndarray | None, u0: np.ndarray | None,
+                    u_reg: np.ndarray | None, want_states: bool, want_innovations: bool) -> RegularRunOutput:
+        """Regular samples at the steady state: time-invariant closed loop, modal recursions."""
         mdl = self.model
         n, m, p, qt = mdl.n, mdl.m, self.p, self.q_total
-        y = np.asarray(y, dtype=np.float64).reshape(-1, m)
         length = y.shape[0]
         out = RegularRunOutput()
         if length == 0:
@@ -573,6 +863,7 @@ class TwoStageFilter:
         if self._real_modes:
             v, v_inv, modes, dtype = v.real, v_inv.real, modes.real, float
         whiten_t = self._whiten.T
+        v_b, v_fk, w_hv = v_inv @ mdl.b, v_inv @ fk, whiten_t @ mdl.h @ v
         xr_all = None if (x_reg is None or evaluation) else np.asarray(x_reg, dtype=np.float64)
         u0_all = None if u0 is None else np.asarray(u0, dtype=np.float64)
         ur_all = None if (u_reg is None or evaluation) else np.asarray(u_reg, dtype=np.float64)
@@ -582,16 +873,21 @@ class TwoStageFilter:
             count = stop - start
             yc = y[start:stop]
             xc = None if xr_all is None else xr_all[start:stop]
-            # state-major drive (n, count, cols) of z_k = A z_{k-1} + D_k
-            drive = np.zeros((n, count, cols))
+            # modal drive (n, count, cols) of w_k = lambda w_{k-1} + V^-1 D_k (index 0 unused), with
+            # D_k = B (u0_k + U_k theta) + F K (y_{k-1} - X_{k-1} theta): built in modal coordinates
+            modal_drive = np.empty((n, count, cols), dtype=dtype)
+            modal_drive[:, 1:, 0] = v_fk @ yc[:-1].T
             if u0_all is not None:
-                drive[:, :, 0] = mdl.b @ u0_all[start:stop].T
+                modal_drive[:, 1:, 0] += v_b @ u0_all[start + 1:stop].T
+            modal_drive[:, 1:, 1 + p:] = 0.0
+            # regressors measurement-major once per chunk: (m, count, p)
+            xt = None if xc is None else np.ascontiguousarray(np.moveaxis(xc, 1, 0))
+            if xt is not None:
+                modal_drive[:, 1:, 1:1 + p] = -(v_fk @ xt.reshape(m, -1)).reshape(n, count, p)[:, :-1]
+            else:
+                modal_drive[:, 1:, 1:1 + p] = 0.0
             if ur_all is not None:
-                drive[:, :, 1:1 + p] = np.tensordot(mdl.b, ur_all[start:stop], axes=([1], [1]))
-            # feedback of the previous sample: F K (y_{k-1} - X_{k-1} theta)
-            drive[:, 1:, 0] += fk @ yc[:-1].T
-            if xc is not None:
-                drive[:, 1:, 1:1 + p] -= np.tensordot(fk, xc[:-1], axes=([1], [1]))
+                modal_drive[:, 1:, 1:1 + p] += np.tensordot(v_b, ur_all[start + 1:stop], axes=([1], [1]))
             first = np.empty((n, cols))
             if self.fresh:
                 first[:, 0] = self.x
@@ -599,49 +895,55 @@ class TwoStageFilter:
                     first[:, 1:] = self.sens
                 self.fresh = False
             else:
-                first[:, 0] = mdl.f @ self.x + drive[:, 0, 0]
+                first[:, 0] = mdl.f @ self.x
+                if u0_all is not None:
+                    first[:, 0] += mdl.b @ u0_all[start]
                 if not evaluation:
-                    first[:, 1:] = mdl.f @ self.sens + drive[:, 0, 1:]
-            # modal coordinates: w_k = lambda w_{k-1} + V^-1 D_k (one filter per conjugate pair)
+                    first[:, 1:] = mdl.f @ self.sens
+                    if ur_all is not None:
+                        first[:, 1:1 + p] += mdl.b @ ur_all[start]
             w_first = v_inv @ first
-            modal_drive = (v_inv @ drive[:, 1:, :].reshape(n, -1)).reshape(n, count - 1, cols)
             modal = np.empty((n, count, cols), dtype=dtype)
             modal[:, 0, :] = w_first
             if count > 1:
                 for i in self._filtered_modes:
-                    lam_i = modes[i]
-                    modal[i, 1:, :], _ = lfilter([1.0], [1.0, -lam_i], modal_drive[i], axis=0,
-                                                 zi=(lam_i * w_first[i])[None, :])
+                    first_order_recursion(modes[i], modal_drive[i, 1:], w_first[i], out=modal[i, 1:])
                 for i, j in self._conjugate_partner.items():
                     modal[i, 1:, :] = np.conj(modal[j, 1:, :])
-            priors = (v @ modal.reshape(n, -1)).reshape(n, count, cols)
+            # prior states x^_k = V w_k (data column) and innovations e0 = y - H x^
+            states = v @ modal[:, :, 0]
             if dtype is complex:
-                priors = priors.real
-            # innovations e0 = y - H x^ and sensitivities S = H M + X
-            e0 = yc.T - mdl.h @ priors[:, :, 0]  # (m, count)
+                states = states.real
+            e0 = yc.T - mdl.h @ states  # (m, count)
             if evaluation:
-                innovations = e0.T
                 ew = whiten_t @ e0
                 nis_parts.append(np.sum(ew * ew, axis=0))
                 if want_innovations:
-                    innov_parts.append(innovations)
+                    innov_parts.append(e0.T)
                 if want_states:
-                    state_parts.append((priors[:, :, 0] + gain @ e0).T)
+                    state_parts.append((states + gain @ e0).T)
+                last = states[:, -1:]
             else:
-                s = (mdl.h @ priors[:, :, 1:].reshape(n, -1)).reshape(m, count, qt)
-                if xc is not None:
-                    s[:, :, :p] += np.moveaxis(xc, 0, 1)
+                # whitened sensitivities L^T S, S = H M + X = (H V) w + X
+                sw = np.tensordot(w_hv, modal[:, :, 1:], axes=([1], [0]))  # (m, count, qt)
+                if dtype is complex:
+                    sw = sw.real.copy()
+                if xt is not None:
+                    sw[:, :, :p] += (whiten_t @ xt.reshape(m, -1)).reshape(m, count, p)
+                sw = sw.reshape(m * count, qt)
                 ew = (whiten_t @ e0).reshape(-1)
-                sw = (whiten_t @ s.reshape(m, -1)).reshape(m * count, qt)
                 self.info += sw.T @ sw
                 self.vector += sw.T @ ew
                 self.chi2 += float(ew @ ew)
                 self.n_updates += count
                 self.dof_total += count * m
+                last = v @ modal[:, -1, :]
+                if dtype is complex:
+                    last = last.real
             # posterior of the last step of the chunk
-            self.x = i_kh @ priors[:, -1, 0] + gain @ yc[-1]
+            self.x = i_kh @ last[:, 0] + gain @ yc[-1]
             if not evaluation:
-                self.sens = i_kh @ priors[:, -1, 1:]
+                self.sens = i_kh @ last[:, 1:]
                 if xc is not None:
                     self.sens[:, :p] -= gain @ xc[-1]
             start = stop

@@ -36,7 +36,7 @@ from taiji2_runtime.bag.contract import (
 )
 from taiji2_runtime.bag.errors import BagError
 from taiji2_runtime.bag.reading import check_types, custom_data, open_reader, storage_identifier
-from taiji2_runtime.interfaces import typestore
+from taiji2_runtime.typestore import typestore
 
 __all__ = ["CommandData", "GrsData", "RawBagError", "RawExperiment", "StarTrackerData", "TopicReport",
            "load_raw_bag"]

@@ -1,67 +1,122 @@
-"""``taiji2 <verb> ...``: dispatches to the verbs registered in the ``taiji2.commands`` entry-point group.
+"""``taiji2 <verb> ...``: ros2-style verbs that work with or without ROS 2.
 
-Each verb module provides ``add_arguments(parser)`` and ``main(args) -> int``; packages add verbs
-(``calibrate``, ``diagnose``, ``experiment``) by declaring an entry point, so this package needs
-no knowledge of them.
+Verbs are found by name, and a verb's module is imported only when that verb runs (or when its
+help is shown), so ``taiji2 --help`` and a light verb start at once:
+
+* the built-in verbs are the table ``BUILTIN_VERBS`` below (name -> module);
+* other packages add verbs by declaring an entry point in the ``taiji2.commands`` group
+  (``"calibrate = taiji2_estimator_pkg.cli.calibrate"`` in their ``setup.py``); the entry points
+  are read only when the verb is not built in, or for ``--help``.
+
+A verb module provides ``add_arguments(parser)`` and ``main(args) -> int``, and imports only the
+standard library at module level: what the verb uses (numpy, scipy, matplotlib, the DDS runtime,
+rosbags) is imported inside ``main`` (a test checks this for every registered verb).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from collections.abc import Sequence
-from importlib.metadata import entry_points
+from types import ModuleType
 
-from taiji2_runtime.entry import report_error
-
-_BUILTIN_VERBS = {
+#: built-in verbs: name -> module (imported when the verb runs)
+BUILTIN_VERBS = {
     "run": "taiji2_runtime.cli.run",
     "topic": "taiji2_runtime.cli.topic",
     "bag": "taiji2_runtime.cli.bag",
 }
 
+_PROG = "taiji2"
+_DESCRIPTION = "ros2-style verbs that work with or without ROS 2"
 
-def _verbs() -> dict[str, str]:
-    verbs = dict(_BUILTIN_VERBS)
+
+def registered_verbs() -> dict[str, str]:
+    """Every verb: the built-in table plus the ``taiji2.commands`` entry points (name -> module)."""
+    from importlib.metadata import entry_points
+
+    verbs = dict(BUILTIN_VERBS)
     for ep in entry_points(group="taiji2.commands"):
         verbs.setdefault(ep.name, ep.value)
     return verbs
 
 
-def build_parser() -> tuple[argparse.ArgumentParser, dict[str, str]]:
-    import importlib
+def _module_of(verb: str) -> str | None:
+    if verb in BUILTIN_VERBS:
+        return BUILTIN_VERBS[verb]
+    return registered_verbs().get(verb)
 
-    parser = argparse.ArgumentParser(prog="taiji2", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="verb", metavar="<verb>")
+
+def _summary(module: ModuleType) -> str:
+    return (module.__doc__ or "").strip().splitlines()[0] if module.__doc__ else ""
+
+
+def _top_parser(verbs: dict[str, str]) -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
+    parser = argparse.ArgumentParser(prog=_PROG, description=_DESCRIPTION)
+    sub = parser.add_subparsers(dest="verb", metavar="<verb>", title="verbs")
     sub.required = True
-    verbs = _verbs()
+    return parser, sub
+
+
+def build_parser(verbs: dict[str, str] | None = None) -> argparse.ArgumentParser:
+    """The full parser (every verb's module is imported for its arguments; for ``--help``)."""
+    verbs = registered_verbs() if verbs is None else verbs
+    parser, sub = _top_parser(verbs)
     for name, module_name in sorted(verbs.items()):
         try:
             module = importlib.import_module(module_name)
         except ImportError:
             continue
-        verb_parser = sub.add_parser(name, help=(module.__doc__ or "").strip().splitlines()[0],
-                                     description=module.__doc__)
+        verb_parser = sub.add_parser(name, help=_summary(module), description=module.__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
         module.add_arguments(verb_parser)
         verb_parser.set_defaults(_module=module)
-    return parser, verbs
+    return parser
+
+
+def _verb_parser(verb: str, module: ModuleType) -> argparse.ArgumentParser:
+    """A parser that knows only ``verb`` (the others are not imported)."""
+    parser, sub = _top_parser({verb: module.__name__})
+    verb_parser = sub.add_parser(verb, help=_summary(module), description=module.__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    module.add_arguments(verb_parser)
+    verb_parser.set_defaults(_module=module)
+    return parser
+
+
+def _report_error(where: str, exc: BaseException) -> None:
+    from taiji2_runtime.entry import report_error
+
+    report_error(where, exc)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser, _ = build_parser()
+    verb = argv[0] if argv else ""
+    module_name = _module_of(verb) if verb and not verb.startswith("-") else None
+    if module_name is None:
+        # no verb, an option (--help) or an unknown verb: the full parser reports it
+        build_parser().parse_args(argv)
+        return 2
     # `taiji2 run pkg exe ...` passes everything after the executable to the node untouched
-    if argv[:1] == ["run"]:
+    if verb == "run":
         from taiji2_runtime.cli import run
 
         return run.run_from_argv(argv[1:])
-    args = parser.parse_args(argv)
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        print(f"{_PROG}: error: verb {verb!r} is registered ({module_name}) but cannot be imported: {exc}",
+              file=sys.stderr)
+        return 2
+    args = _verb_parser(verb, module).parse_args(argv)
     try:
         return int(args._module.main(args) or 0)
     except KeyboardInterrupt:
         return 130
     except (ValueError, LookupError, OSError, RuntimeError) as exc:
-        report_error(f"taiji2 {args.verb}", exc)
+        _report_error(f"{_PROG} {args.verb}", exc)
         return 2
 
 

@@ -9,11 +9,6 @@ import time
 from collections import deque
 from typing import Any
 
-import yaml
-
-from taiji2_runtime.interfaces import to_plain
-from taiji2_runtime.ros import messages, rclpy
-
 _DISCOVERY_S = 0.6
 
 
@@ -36,6 +31,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _msg_class(type_name: str) -> type:
+    from taiji2_runtime.ros import messages
+
     parts = type_name.split("/")
     if len(parts) == 2:
         parts = [parts[0], "msg", parts[1]]
@@ -48,6 +45,8 @@ def _msg_class(type_name: str) -> type:
 
 
 def _topic_type(node: Any, topic: str, wait_s: float) -> str:
+    from taiji2_runtime.ros import rclpy
+
     deadline = time.monotonic() + wait_s
     while True:
         for name, types in node.get_topic_names_and_types():
@@ -62,16 +61,22 @@ class _Session:
     """rclpy init + a short-lived node for a CLI verb; always shut down on exit."""
 
     def __enter__(self) -> Any:
+        from taiji2_runtime.ros import rclpy
+
         rclpy.init(args=["taiji2"])
         self.node = rclpy.create_node(f"taiji2_cli_{int(time.time() * 1e3) % 10**9}")
         return self.node
 
     def __exit__(self, *exc: object) -> None:
+        from taiji2_runtime.ros import rclpy
+
         self.node.destroy_node()
         rclpy.try_shutdown()
 
 
 def _spin(node: Any, until: Any) -> None:
+    from taiji2_runtime.ros import rclpy
+
     try:
         while rclpy.ok() and not until():
             rclpy.spin_once(node, timeout_sec=0.1)
@@ -92,12 +97,18 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def _qos(reliability: str) -> Any:
+    from taiji2_runtime.ros import rclpy
+
     qos = rclpy.qos
     policy = qos.ReliabilityPolicy.RELIABLE if reliability == "reliable" else qos.ReliabilityPolicy.BEST_EFFORT
     return qos.QoSProfile(depth=100, reliability=policy)
 
 
 def cmd_echo(args: argparse.Namespace) -> int:
+    import yaml
+
+    from taiji2_runtime.interfaces import to_plain
+
     with _Session() as node:
         type_name = args.message_type or _topic_type(node, args.topic, args.wait)
         msg_class = _msg_class(type_name)

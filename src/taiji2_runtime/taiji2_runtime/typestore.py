@@ -1,0 +1,74 @@
+"""The rosbags type store of the workspace: ROS 2 Humble types plus this workspace's ``.msg`` files.
+
+Kept apart from :mod:`taiji2_runtime.interfaces` (which builds Cyclone DDS classes) so that
+reading bags does not import Cyclone DDS.
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+import os
+from functools import cache
+from pathlib import Path
+
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys.store import Typestore
+
+__all__ = ["WORKSPACE_INTERFACE_PACKAGES", "split_type", "typestore", "workspace_msg_definitions"]
+
+#: interface packages of this workspace (their .msg files are the single source of truth)
+WORKSPACE_INTERFACE_PACKAGES = ("taiji2_msgs",)
+
+
+def split_type(msgtype: str) -> tuple[str, str, str]:
+    """Split ``pkg/msg/Name`` (or ``pkg/Name``) into its three parts.
+
+    Raises
+    ------
+    ValueError
+        If ``msgtype`` is not a ROS 2 interface type name.
+    """
+    parts = msgtype.split("/")
+    if len(parts) == 2:
+        parts = [parts[0], "msg", parts[1]]
+    if len(parts) != 3 or not all(parts):
+        raise ValueError(f"not a ROS 2 message type name: {msgtype!r} (expected pkg/msg/Name)")
+    return parts[0], parts[1], parts[2]
+
+
+def _msg_dirs(package: str) -> list[Path]:
+    dirs: list[Path] = []
+    try:
+        resource = importlib.resources.files(f"{package}.msg")
+        dirs.append(Path(str(resource)))
+    except (ModuleNotFoundError, TypeError):
+        pass
+    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+        if prefix:
+            dirs.append(Path(prefix) / "share" / package / "msg")
+    return [d for d in dirs if d.is_dir()]
+
+
+def workspace_msg_definitions(package: str) -> dict[str, str]:
+    """``{"pkg/msg/Name": msg_text}`` for every ``.msg`` file of an interface package.
+
+    Raises
+    ------
+    LookupError
+        If no ``.msg`` file of ``package`` can be found.
+    """
+    for directory in _msg_dirs(package):
+        files = sorted(directory.glob("*.msg"))
+        if files:
+            return {f"{package}/msg/{f.stem}": f.read_text(encoding="utf-8") for f in files}
+    raise LookupError(f"no .msg definitions found for interface package {package!r}")
+
+
+@cache
+def typestore() -> Typestore:
+    """The rosbags type store holding the standard ROS 2 Humble types and this workspace's messages."""
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    for package in WORKSPACE_INTERFACE_PACKAGES:
+        for msgtype, text in workspace_msg_definitions(package).items():
+            store.register(get_types_from_msg(text, msgtype))
+    return store
