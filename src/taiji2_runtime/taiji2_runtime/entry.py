@@ -13,7 +13,7 @@ import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from taiji2_runtime.ros import rclpy
+from taiji2_runtime.ros import RCLError, rclpy
 
 #: exit status for bad input (as argparse uses)
 EXIT_BAD_INPUT = 2
@@ -23,9 +23,9 @@ def _user_error_types() -> tuple[type[BaseException], ...]:
     names = ("ParameterException", "InvalidParameterTypeException", "InvalidParameterValueException",
              "ParameterNotDeclaredException", "ParameterAlreadyDeclaredException", "InvalidParameterException",
              "DdsUnavailableError", "NodeNameNonUniqueError", "InvalidNodeNameException",
-             "InvalidNamespaceException", "InvalidTopicNameException", "RCLError")
+             "InvalidNamespaceException", "InvalidTopicNameException")
     found = [getattr(rclpy.exceptions, n) for n in names if hasattr(rclpy.exceptions, n)]
-    return (ValueError, LookupError, OSError, *found)
+    return (ValueError, LookupError, OSError, RCLError, *found)
 
 
 def _shutdown_types() -> tuple[type[BaseException], ...]:
@@ -41,6 +41,17 @@ def report_error(program: str, exc: BaseException) -> None:
         traceback.print_exception(exc)
 
 
+def _stopping(node: Any) -> bool:
+    """True once SIGINT/SIGTERM (or the node itself) shut the context down: an entity torn down
+    under a callback that was still running is part of a clean stop, not an error."""
+    if node is None:
+        return False
+    try:
+        return not node.context.ok()
+    except Exception:
+        return True
+
+
 def run_node(make_node: Callable[[], Any], args: Sequence[str] | None = None, program: str | None = None) -> int:
     """Init the client library, build the node, spin until shutdown; return the exit status."""
     argv = list(sys.argv if args is None else args)
@@ -53,9 +64,13 @@ def run_node(make_node: Callable[[], Any], args: Sequence[str] | None = None, pr
     except _shutdown_types():
         pass
     except _user_error_types() as exc:
+        if _stopping(node):
+            return 0
         report_error(program, exc)
         return EXIT_BAD_INPUT
     except Exception as exc:
+        if _stopping(node):
+            return 0
         report_error(program, exc)
         return 1
     finally:

@@ -44,6 +44,13 @@ else:
 if RUNTIME == "cyclonedds":
     from taiji2_runtime import dds_rclpy as rclpy
 
+    RCLError: type[Exception] = rclpy.exceptions.RCLError
+else:
+    # rcl's error type lives in the C extension, not in rclpy.exceptions (Humble and Jazzy alike)
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
+
+    RCLError = _rclpy_impl.RCLError
+
 
 class _Messages:
     """``messages.<package>`` is the ``<package>.msg`` module of the chosen runtime."""
@@ -60,4 +67,4 @@ class _Messages:
 
 messages = _Messages()
 
-__all__ = ["RUNTIME", "messages", "rclpy"]
+__all__ = ["RUNTIME", "RCLError", "messages", "rclpy"]

@@ -68,3 +68,7 @@ class NodeNameNonUniqueError(RuntimeError):
 
 class DdsUnavailableError(RuntimeError):
     """The DDS domain could not be created (e.g. no usable network interface)."""
+
+
+class RCLError(RuntimeError):
+    """rcl reported an error (as ``rclpy._rclpy_pybind11.RCLError``)."""

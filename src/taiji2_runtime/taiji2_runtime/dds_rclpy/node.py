@@ -164,7 +164,7 @@ class Node(ParameterMixin):
         fqn = self.resolve_topic_name(topic)
         dds_topic = self._context.topic(_dds_topic(fqn), msg_type)
         writer = DataWriter(self._context.participant(), dds_topic, to_dds_qos(profile))
-        publisher = Publisher(writer, msg_type, fqn, profile)
+        publisher = Publisher(writer, msg_type, fqn, profile, context_ok=self._context.ok)
         self._publishers.append(publisher)
         self._context.entities_version += 1
         return publisher

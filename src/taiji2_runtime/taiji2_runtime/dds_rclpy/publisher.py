@@ -2,23 +2,42 @@
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from typing import Any
 
+from cyclonedds.core import DDSException
 from cyclonedds.pub import DataWriter
 from cyclonedds.util import duration
 
 from .duration import Duration
 from .qos import QoSProfile
 
+#: Longest a reliable write waits for a slow reader before the sample is given up for it [s].
+DEFAULT_WRITE_TIMEOUT_S = 30.0
+
 
 class Publisher:
-    """Publishes messages of one type on one topic."""
+    """Publishes messages of one type on one topic.
 
-    def __init__(self, writer: DataWriter, msg_type: type, topic_name: str, qos_profile: QoSProfile) -> None:
+    A reliable writer whose history is full blocks while a matched reliable reader is behind
+    (back-pressure, as rmw_cyclonedds does under rclpy). Cyclone returns a timeout after its
+    ``max_blocking_time``; the write is then retried until ``write_timeout_s`` has passed, after
+    which the sample is given up and counted in :attr:`samples_dropped`: a slow or stalled peer
+    never ends the publishing node. A write after the context has shut down is dropped silently.
+    """
+
+    def __init__(self, writer: DataWriter, msg_type: type, topic_name: str, qos_profile: QoSProfile,
+                 context_ok: Callable[[], bool] = lambda: True) -> None:
         self._writer: DataWriter | None = writer
         self.msg_type = msg_type
         self._topic_name = topic_name
         self.qos_profile = qos_profile
+        self._context_ok = context_ok
+        #: see the class docstring [s]
+        self.write_timeout_s = DEFAULT_WRITE_TIMEOUT_S
+        #: samples given up after ``write_timeout_s`` of back-pressure
+        self.samples_dropped = 0
 
     @property
     def topic_name(self) -> str:
@@ -42,7 +61,24 @@ class Publisher:
             raise TypeError(
                 f"Expected {self.msg_type.__name__}, got {type(msg).__name__} on topic {self._topic_name}"
             )
-        self.handle.write(msg)
+        if self._writer is None and not self._context_ok():
+            return
+        deadline: float | None = None
+        while True:
+            try:
+                self.handle.write(msg)
+                return
+            except DDSException as exc:
+                if not self._context_ok():
+                    return  # shutting down: peers are gone or the participant is deleted
+                if exc.code != DDSException.DDS_RETCODE_TIMEOUT:
+                    raise
+            # a reliable reader is behind: wait for it, bounded by write_timeout_s
+            now = time.monotonic()
+            deadline = now + self.write_timeout_s if deadline is None else deadline
+            if now >= deadline:
+                self.samples_dropped += 1
+                return
 
     def get_subscription_count(self) -> int:
         return self.handle.get_publication_matched_status().current_count

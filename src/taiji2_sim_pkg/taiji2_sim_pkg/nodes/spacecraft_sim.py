@@ -39,6 +39,10 @@ GRS_TOPICS = ("/taiji2/grs1/voltages", "/taiji2/grs2/voltages")
 TMRF_FRAMES = ("tmrf1", "tmrf2")
 CLOCK_MODES = ("realtime", "accelerated", "follow")
 _NS = 1_000_000_000
+#: A command stamp further than this from the simulator's time is on another time base [ns].
+TIME_BASE_TOLERANCE_NS = 3600 * _NS
+#: Stamps after 2001-09-09 (1e9 s) are read as system (wall-clock) time in the WARN text [ns].
+WALL_CLOCK_EPOCH_NS = 10**9 * _NS
 #: Largest number of steps simulated in one call in accelerated mode (bounds latency of /clock).
 _MAX_CHUNK_STEPS = 100
 
@@ -120,6 +124,7 @@ class SpacecraftSim(rclpy.node.Node):
         self._t0_wall_ns = 0
         self._waiting_since = time.monotonic()
         self._late_commands = 0
+        self._time_base_mismatches = 0
 
         m = messages
         reliable_all = rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL,
@@ -161,11 +166,28 @@ class SpacecraftSim(rclpy.node.Node):
                 "keeping the last valid command", throttle_duration_sec=5.0)
             return
         stamp_ns = msg.header.stamp.sec * _NS + msg.header.stamp.nanosec
+        self._check_time_base(stamp_ns)
         if not self._schedule.offer(stamp_ns, self._gate.torque_n_m):
             self.get_logger().warn(f"command stamped {stamp_ns / _NS:.3f} s arrived out of order; ignored",
                                    throttle_duration_sec=5.0)
         if self._mode == "accelerated" and self._sync and self._step_timer.is_canceled():
             self._step_timer.reset()  # step once the commands already queued are taken, in one chunk
+
+    def _check_time_base(self, stamp_ns: int) -> None:
+        """WARN once when commands are stamped on another time base than the simulator's."""
+        sim_now_ns = self._t0_wall_ns + self._time_ns() if self._mode == "realtime" else self._time_ns()
+        if abs(stamp_ns - sim_now_ns) <= TIME_BASE_TOLERANCE_NS:
+            return
+        self._time_base_mismatches += 1
+        if self._time_base_mismatches > 1:
+            return
+        ours = "system (wall-clock) time" if self._mode == "realtime" else f"simulated time ({self._mode} mode)"
+        theirs = "system (wall-clock) time" if stamp_ns > WALL_CLOCK_EPOCH_NS else "simulated time"
+        self.get_logger().warn(
+            f"command stamped {stamp_ns / _NS:.3f} s ({theirs}) but this simulator runs on {ours}, now "
+            f"{sim_now_ns / _NS:.3f} s: the commander is on another time base, so its commands apply far in "
+            "the past or future. Start the commander with `--ros-args -p use_sim_time:=true` (or this "
+            "simulator with clock_mode:=realtime). Counted as time_base_mismatches on /diagnostics.")
 
     # -- stepping ------------------------------------------------------------------------------
     def _time_ns(self) -> int:
@@ -271,7 +293,7 @@ class SpacecraftSim(rclpy.node.Node):
     def _exit(self) -> None:
         self._exit_timer.cancel()
         self._provenance_pub.wait_for_all_acked(rclpy.duration.Duration(seconds=2))
-        self.context.try_shutdown("simulation finished")
+        self.context.try_shutdown()  # rclpy: no reason argument (Humble and Jazzy)
 
     # -- output --------------------------------------------------------------------------------
     def _check_range(self, t_s: Any, maneuver: Any, total: Any) -> None:
@@ -317,7 +339,10 @@ class SpacecraftSim(rclpy.node.Node):
                   "total_peak_fraction_of_range": summary["total"]["fraction_of_range"],
                   "total_samples_outside": summary["total"]["samples_outside"],
                   "commands_rejected": self._gate.rejected,
-                  "late_commands": self._late_commands, "sim_time_s": self._time_ns() / _NS}
+                  "late_commands": self._late_commands, "time_base_mismatches": self._time_base_mismatches,
+                  "publisher_samples_dropped": sum(getattr(p, "samples_dropped", 0)
+                                                   for p in (self._star_pub, *self._grs_pubs)),
+                  "sim_time_s": self._time_ns() / _NS}
         status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in values.items()]
         array = d.DiagnosticArray(status=[status])
         _stamp(array.header, self._time_ns())
