@@ -1,0 +1,61 @@
+"""The real-ROS 2 tier: colcon-built packages, `ros2 run`, `ros2 topic`, a mixed graph.
+
+Runs only when asked (``TAIJI2_RCLPY_TIER=1``, as ``.ci/run`` does where ROS 2 is installed); the
+README test command leaves it to ``.ci/run``. The workspace is built once per session with colcon
+into a temporary directory; every ROS command runs in a bash that sourced ROS 2 and that workspace,
+with this interpreter's site-packages appended so scipy/PyYAML/cyclonedds resolve.
+"""
+
+from __future__ import annotations
+
+import os
+import site
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from taiji2_runtime.dds_rclpy.context import DEFAULT_CYCLONEDDS_CONFIG
+
+REPO = Path(__file__).resolve().parents[2]
+ENABLED = os.environ.get("TAIJI2_RCLPY_TIER") == "1"
+if not ENABLED:
+    collect_ignore_glob = ["test_*.py"]
+
+#: ROS 2 environment script (this project's shared build sets RMW_IMPLEMENTATION=rmw_cyclonedds_cpp).
+ROS_ENV = os.environ.get("TAIJI2_ROS_ENV", str(REPO.parent / "shared" / "ros2" / "env.sh"))
+
+
+@pytest.fixture(scope="session")
+def ros(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., subprocess.CompletedProcess]:
+    """``ros("ros2 ...", timeout=s)`` runs a bash command line in the sourced ROS 2 + workspace."""
+    if not Path(ROS_ENV).is_file():
+        pytest.skip(f"no ROS 2 environment script at {ROS_ENV}")
+    ws = tmp_path_factory.mktemp("ws")
+    domain = str(150 + os.getpid() % 50)
+    packages = ":".join(site.getsitepackages())
+    # Debian's python3 first: ROS 2 and rosidl's code generators run on it
+    prefix = (f"export PATH=/usr/bin:$PATH ROS_DOMAIN_ID={domain} && source {ROS_ENV} >/dev/null && "
+              f"export PYTHONPATH=${{PYTHONPATH:+$PYTHONPATH:}}{packages}")
+    build = subprocess.run(["bash", "-c", f"{prefix} && cd {ws} && colcon build --base-paths {REPO}/src "
+                                          "--event-handlers console_direct- 2>&1"],
+                           capture_output=True, text=True, timeout=900)
+    assert build.returncode == 0, build.stdout[-3000:]
+    prefix += f" && source {ws}/install/setup.bash"
+
+    def run(command: str, timeout: float = 120.0, env: dict[str, str] | None = None,
+            background: bool = False) -> subprocess.CompletedProcess | subprocess.Popen:
+        full_env = {**os.environ, **(env or {})}
+        full_env.pop("TAIJI2_RUNTIME", None)
+        # one Cyclone configuration for rclpy (rmw_cyclonedds) and embedded nodes: the embedded
+        # runtime's loopback default, so both discover each other (the mixed-graph setup of docs/runtime.md)
+        full_env["CYCLONEDDS_URI"] = DEFAULT_CYCLONEDDS_CONFIG
+        full_env.update(env or {})
+        args = ["bash", "-c", f"{prefix} && {command}"]
+        if background:
+            return subprocess.Popen(args, env=full_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                    start_new_session=True)
+        return subprocess.run(args, env=full_env, capture_output=True, text=True, timeout=timeout)
+
+    return run
