@@ -119,7 +119,8 @@ def main(args: argparse.Namespace) -> int:
     if args.minimize_duration:
         target = reference_s * float(np.max(ratios)) ** 2
         for _ in range(4):
-            target = result.period_s * np.ceil(target / result.period_s)
+            # whole seconds: the estimator nodes close their epochs on whole seconds of data
+            target = float(np.ceil(target))
             if target > _MAX_DURATION_S:
                 return _fail(f"infeasible: duration: every requirement needs {target / 86400:.1f} d "
                              f"> {_MAX_DURATION_S / 86400:.0f} d")
