@@ -111,7 +111,7 @@ def test_bad_maneuver_file_is_one_line_naming_the_key(tmp_path):
 @pytest.mark.slow
 def test_design_cli_writes_the_files_and_beats_or_matches_the_paper(tmp_path):
     out = tmp_path / "d"
-    status = taiji2(["design", "--layout", "type1", "--family", "square", "--duration-s", "1000",
+    status = taiji2(["design", "--layout", "type1", "--family", "square", "--duration-s", "500",
                      "--budget-s", "1", "--no-plots", "--out", str(out)])
     assert status == 0
     report = json.loads((out / "report.json").read_text())
@@ -123,5 +123,5 @@ def test_design_cli_writes_the_files_and_beats_or_matches_the_paper(tmp_path):
     usage = report["design"]["usage"]
     assert np.max(usage["range_fraction"]) <= 0.9 and np.max(usage["attitude_peak_rad"]) <= 0.01
     assert np.max(usage["thrust_peak_n"]) <= 1e-4
-    assert load_maneuver_file(out / "maneuver.yaml").duration_s == 1000.0
+    assert load_maneuver_file(out / "maneuver.yaml").duration_s == 500.0
     assert (out / "report.md").read_text().count("| grs") == 12
