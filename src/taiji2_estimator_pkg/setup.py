@@ -27,6 +27,7 @@ setup(
             "diagnose = taiji2_estimator_pkg.cli.diagnose",
             "plot = taiji2_estimator_pkg.cli.plot",
             "campaign = taiji2_estimator_pkg.cli.campaign",
+            "design = taiji2_estimator_pkg.cli.design",
         ],
         "console_scripts": ["scale_factor_estimator = taiji2_estimator_pkg.nodes.scale_factor_estimator:main", "com_offset_estimator = taiji2_estimator_pkg.nodes.com_offset_estimator:main"],
     },

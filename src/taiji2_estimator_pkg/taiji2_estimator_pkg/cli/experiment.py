@@ -25,7 +25,11 @@ _NS = 1_000_000_000
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--layout", default="type1", help="built-in layout: type1 | type2 (default type1)")
     parser.add_argument("--config", default="", help="simulator config YAML instead of --layout")
-    parser.add_argument("--duration-s", type=float, default=10800.0, help="experiment length [s] (default 3 h)")
+    parser.add_argument("--duration-s", type=float, default=None,
+                        help="experiment length [s] (default: the --maneuver file's duration, else 3 h)")
+    parser.add_argument("--maneuver", default="",
+                        help="maneuver file (e.g. maneuver.yaml of taiji2 design) flown by maneuver_commander "
+                             "instead of the layout's square wave")
     parser.add_argument("--seed", type=int, default=1, help="simulator seed (default 1)")
     parser.add_argument("--method", default="gls", help="estimator method: gls (default) | paper")
     parser.add_argument("--override", action="append", default=[],
@@ -90,6 +94,22 @@ def main(args: argparse.Namespace) -> int:
 
     out = Path(args.out or tempfile.mkdtemp(prefix="taiji2-experiment-"))
     out.mkdir(parents=True, exist_ok=True)
+    commander_maneuver: list[str] = []
+    if args.maneuver:
+        from taiji2_sim_pkg.core.config import ConfigError
+        from taiji2_sim_pkg.core.maneuver_families import load_maneuver_file
+
+        try:
+            flown = load_maneuver_file(args.maneuver)
+        except ConfigError as exc:
+            print(f"error: taiji2 experiment: {exc}", file=sys.stderr)
+            return 2
+        if args.duration_s is None:
+            # whole seconds: the estimator nodes close their epochs on whole seconds of data
+            args.duration_s = float(-(-(flown.start_s + flown.duration_s) // 1.0))
+        commander_maneuver = ["-p", f"maneuver_file:={Path(args.maneuver).resolve()}"]
+    if args.duration_s is None:
+        args.duration_s = 10800.0
     n_steps = round(args.duration_s * 10)
     overrides = [f"maneuver.duration_s={args.duration_s}", *args.override]
     source = ["-p", f"config_file:={args.config}"] if args.config else ["-p", f"layout:={args.layout}"]
@@ -102,7 +122,8 @@ def main(args: argparse.Namespace) -> int:
         "scale_factor_estimator": ["run", "taiji2_estimator_pkg", "scale_factor_estimator", *est_args],
         "com_offset_estimator": ["run", "taiji2_estimator_pkg", "com_offset_estimator", *est_args],
         "maneuver_commander": ["run", "taiji2_sim_pkg", "maneuver_commander", "--ros-args", "-p",
-                               f"preset:={args.layout}", "-p", "use_sim_time:=true", "-p", "lookahead_s:=2.0"],
+                               f"preset:={args.layout}", "-p", "use_sim_time:=true", "-p", "lookahead_s:=2.0",
+                               *commander_maneuver],
         "spacecraft_sim": ["run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", *source, "-p",
                            f"seed:={args.seed}", "-p", f"duration_s:={args.duration_s}",
                            "-p", f"wait_for_subscribers:={subscribers}",
@@ -144,9 +165,14 @@ def main(args: argparse.Namespace) -> int:
                       f"({time.monotonic() - started:.0f} s wall)", file=sys.stderr)
         elapsed = time.monotonic() - started
         table = EstimateTable.from_messages(monitor.latest, layout=args.layout)
-        (out / "results.json").write_text(json.dumps(table.to_dict(), indent=2))
+        results = table.to_dict()
+        if args.maneuver:
+            from taiji2_sim_pkg.core.maneuver_families import maneuver_spec
+
+            results["maneuver"] = {"file": str(Path(args.maneuver).resolve()), **maneuver_spec(flown)}
+        (out / "results.json").write_text(json.dumps(results, indent=2))
         if args.json:
-            print(json.dumps(table.to_dict()))
+            print(json.dumps(results))
         else:
             print(format_table(table))
             print(f"\n{args.duration_s:g} s simulated in {elapsed:.1f} s wall "

@@ -408,7 +408,8 @@ def simulate_batch(config: SimConfig, seed: int | None, torque_cmd_n_m: ArrayLik
     return Simulator(config, seed=seed, t0_s=t0_s, effects=effects).advance(torque_cmd_n_m, force_cmd_n)
 
 
-def maneuver_torque_commands(config: SimConfig, n_steps: int | None = None, t0_s: float = 0.0) -> np.ndarray:
+def maneuver_torque_commands(config: SimConfig, n_steps: int | None = None, t0_s: float = 0.0,
+                             maneuver: Any = None) -> np.ndarray:
     """Torque commands of the configured maneuver, one per step, sampled at the step starts.
 
     Parameters
@@ -419,13 +420,17 @@ def maneuver_torque_commands(config: SimConfig, n_steps: int | None = None, t0_s
         Number of steps; default: up to the end of the maneuver, ``round((end - t0) fs)``.
     t0_s : float
         Initial time [s].
+    maneuver : object, optional
+        Any maneuver family (:mod:`.maneuver_families`, e.g. from a maneuver file) instead of the
+        configured square wave; the sampling is the same as the maneuver_commander's.
 
     Returns
     -------
     numpy.ndarray
         (n_steps, 3) command held over (t_k, t_{k+1}], t_k = t0 + k / fs [N m].
     """
-    maneuver = SquareWaveManeuver.from_config(config.maneuver)
+    if maneuver is None:
+        maneuver = SquareWaveManeuver.from_config(config.maneuver)
     if n_steps is None:
         n_steps = max(0, round((maneuver.end_s - t0_s) * config.sample_rate_hz))
     return maneuver.torque_series(t0_s + np.arange(n_steps, dtype=np.float64) * config.dt_s)

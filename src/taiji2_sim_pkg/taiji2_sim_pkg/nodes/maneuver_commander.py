@@ -1,6 +1,8 @@
 """maneuver_commander: publishes the square-wave calibration torque on /taiji2/maneuver/command.
 
-Thin ROS glue around :class:`taiji2_sim_pkg.core.maneuver.SquareWaveManeuver`. Parameters are
+Thin ROS glue around :class:`taiji2_sim_pkg.core.maneuver.SquareWaveManeuver`, or any maneuver
+family of :mod:`taiji2_sim_pkg.core.maneuver_families` read from ``maneuver_file`` (e.g. written by
+``taiji2 design``; the square-wave keys are then ignored). Parameters are
 documented in ``config/maneuver_commander.yaml``. The command is published at every tick of
 ``publish_rate_hz`` on the node clock (so at each change, delayed by at most one tick, and at least
 at 1 Hz); on simulated time (``use_sim_time``) every tick follows /clock, which lets the simulator
@@ -18,6 +20,7 @@ from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.config import builtin_layouts, load_config
 from taiji2_sim_pkg.core.maneuver import SquareWaveManeuver
+from taiji2_sim_pkg.core.maneuver_families import check_thrust, load_maneuver_file, maneuver_spec
 
 COMMAND_TOPIC = "/taiji2/maneuver/command"
 _NS = 1e-9
@@ -68,9 +71,13 @@ class ManeuverCommander(rclpy.node.Node):
         lever_arm_m = self.declare_parameter(
             "thruster_lever_arm_m", float(thrusters.lever_arm_m),
             _descriptor("lever arm of the thruster making each axis' torque [m]; thrust = |torque| / arm")).value
-        self._maneuver = SquareWaveManeuver(**p)
+        maneuver_file = self.declare_parameter(
+            "maneuver_file", "", _descriptor("maneuver file (YAML/JSON, any family: square | multisine | "
+                                             "piecewise, e.g. from taiji2 design); empty: the square wave of "
+                                             "the keys above")).value
+        self._maneuver = load_maneuver_file(maneuver_file) if maneuver_file else SquareWaveManeuver(**p)
         # refuse a maneuver the micro-thrusters cannot fly (ManeuverError names the axis)
-        self._maneuver.check_thrust(thrusters.min_thrust_n, thrusters.max_thrust_n, lever_arm_m)
+        check_thrust(self._maneuver, thrusters.min_thrust_n, thrusters.max_thrust_n, lever_arm_m)
         self._wrench_type = messages.geometry_msgs.WrenchStamped
         qos = rclpy.qos.QoSProfile(
             history=rclpy.qos.HistoryPolicy.KEEP_ALL, reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
@@ -86,10 +93,13 @@ class ManeuverCommander(rclpy.node.Node):
         self._first_command_timer = self.create_timer(
             0.02, self._publish_first_command,
             clock=rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME))
-        self.get_logger().info(
-            f"preset {preset}: period {p['period_s']} s, amplitude {p['amplitude_n_m']} N m, "
-            f"phase {p['phase_s']} s, start {p['start_s']} s, duration {p['duration_s']} s, "
-            f"{rate_hz} Hz on {'simulated' if self._sim_time else 'system'} time")
+        if maneuver_file:
+            self.get_logger().info(f"maneuver file {maneuver_file}: {maneuver_spec(self._maneuver)}")
+        else:
+            self.get_logger().info(
+                f"preset {preset}: period {p['period_s']} s, amplitude {p['amplitude_n_m']} N m, "
+                f"phase {p['phase_s']} s, start {p['start_s']} s, duration {p['duration_s']} s, "
+                f"{rate_hz} Hz on {'simulated' if self._sim_time else 'system'} time")
 
     def _publish_first_command(self) -> None:
         if self._last_torque is not None:

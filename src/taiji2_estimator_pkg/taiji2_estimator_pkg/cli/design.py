@@ -1,0 +1,167 @@
+"""Design the calibration maneuver: minimise the largest CRLB / requirement inside range, thrust, attitude.
+
+Writes into --out: ``maneuver.yaml`` (maneuver_commander ``maneuver_file``; ``taiji2 experiment
+--maneuver``), ``report.json`` (objects ``design`` and ``paper``, each with
+``crlb_over_requirement`` per parameter), ``report.md`` and PNGs. Progress on stderr.
+
+Exit status: 0 designed, 2 bad input or infeasible constraints (one line naming the binding constraint).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+_MAX_DURATION_S = 30 * 86400.0
+_FULL_BOUND_MAX_S = 4 * 3600.0  # longer records are verified with the (conservative) fast bound
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``taiji2 design``."""
+    parser.add_argument("--layout", default="type1", help="built-in layout type1 | type2 (default type1)")
+    parser.add_argument("--config", default="", help="simulator config YAML instead of --layout")
+    parser.add_argument("--duration-s", type=float, default=10800.0,
+                        help="maneuver duration [s] (default 10800; with --minimize-duration: the reference)")
+    parser.add_argument("--minimize-duration", action="store_true",
+                        help="shortest duration with every requirement met at 1 sigma")
+    parser.add_argument("--family", default="square", choices=("square", "multisine", "piecewise"),
+                        help="maneuver family (default square)")
+    parser.add_argument("--out", default="design", help="output directory (default ./design)")
+    parser.add_argument("--range-margin", type=float, default=0.9,
+                        help="allowed peak maneuver-induced linear acceleration / GRS range (default 0.9)")
+    parser.add_argument("--max-attitude-rad", type=float, default=0.01,
+                        help="allowed peak attitude excursion per axis [rad] (default 0.01: the small-angle "
+                             "error theta^2/2 stays 60x below the 0.3 %% G requirement)")
+    parser.add_argument("--seed", type=int, default=1, help="optimiser seed (default 1)")
+    parser.add_argument("--budget-s", type=float, default=150.0, help="wall-clock budget of the search [s]")
+    parser.add_argument("--no-plots", action="store_true", help="skip the PNGs")
+
+
+def _fail(message: str) -> int:
+    print(f"error: taiji2 design: {message}", file=sys.stderr)
+    return 2
+
+
+def _say(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def _fit(problem: Any, fam: Any, x: np.ndarray, duration_s: float, constraints: Any) -> tuple[Any, Any, str]:
+    """Project x at this duration and check the full simulation; shrink until every limit holds."""
+    from taiji2_estimator_pkg.design.optimize import project
+
+    maneuver, scale, binding = project(problem, fam, x, duration_s, constraints)
+    for _ in range(5):
+        usage = problem.usage(maneuver, duration_s)
+        excess = max(float(np.max(usage.range_fraction)) / constraints.range_margin,
+                     float(np.max(usage.attitude_rad)) / constraints.max_attitude_rad,
+                     float(np.max(usage.thrust_n)) / problem.max_thrust_n)
+        if excess <= 1.0:
+            return maneuver, usage, binding
+        scale /= excess * 1.001
+        maneuver = fam.maneuver(x, scale, duration_s, problem.min_thrust_n * problem.lever_arm_m)
+    raise RuntimeError("design does not settle inside the constraints")
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run ``taiji2 design``."""
+    from taiji2_estimator_pkg.design.evaluate import PARAMETER_NAMES, DesignProblem
+    from taiji2_estimator_pkg.design.families import family
+    from taiji2_estimator_pkg.design.optimize import Constraints, InfeasibleError, check_feasible, optimize
+    from taiji2_estimator_pkg.design.report import summary, write_report
+    from taiji2_sim_pkg.core.config import ConfigError
+    from taiji2_sim_pkg.core.maneuver_families import save_maneuver_file
+
+    if not (np.isfinite(args.duration_s) and args.duration_s >= 100.0):
+        return _fail(f"--duration-s: must be >= 100 s, got {args.duration_s!r}")
+    if not (0.0 < args.range_margin <= 1.0):
+        return _fail(f"--range-margin: must be in (0, 1], got {args.range_margin!r}")
+    if not (np.isfinite(args.max_attitude_rad) and args.max_attitude_rad > 0.0):
+        return _fail(f"--max-attitude-rad: must be > 0, got {args.max_attitude_rad!r}")
+    started = time.monotonic()
+    try:
+        problem = DesignProblem(args.config or args.layout)
+    except (ConfigError, OSError) as exc:
+        return _fail(str(exc).splitlines()[0])
+    layout = args.config or args.layout
+    constraints = Constraints(args.range_margin, args.max_attitude_rad)
+    reference_s = float(args.duration_s)
+    try:
+        check_feasible(problem, reference_s, constraints)
+    except InfeasibleError as exc:
+        return _fail(str(exc))
+    result = optimize(problem, args.family, reference_s, constraints, args.seed, args.budget_s, _say)
+    fam = family(args.family)
+    _say("design: checking the design and the paper's preset with the full bound")
+    try:
+        maneuver, usage, binding = _fit(problem, fam, result.x, reference_s, constraints)
+    except (InfeasibleError, RuntimeError) as exc:
+        return _fail(f"infeasible: {exc}")
+    bound = problem.bound(maneuver, reference_s)
+    from taiji2_estimator_pkg.design.evaluate import requirement_ratios
+
+    ratios = requirement_ratios(bound)
+    paper = problem.paper_maneuver(reference_s)
+    paper_bound = problem.bound(paper, reference_s)
+    paper_ratios = requirement_ratios(paper_bound)
+    paper_usage = problem.usage(paper, reference_s)
+    at_reference = {"paper_max": float(np.max(paper_ratios)),
+                    "paper_binding": PARAMETER_NAMES[int(np.argmax(paper_ratios))],
+                    "design_max": float(np.max(ratios)), "design_binding": PARAMETER_NAMES[int(np.argmax(ratios))],
+                    "reduction": float(1.0 - np.max(ratios) / np.max(paper_ratios))}
+    final_s, final_maneuver, final_usage, final_bound, final_ratios = reference_s, maneuver, usage, bound, ratios
+    verified = True
+    if args.minimize_duration:
+        target = reference_s * float(np.max(ratios)) ** 2
+        for _ in range(4):
+            # whole seconds: the estimator nodes close their epochs on whole seconds of data
+            target = float(np.ceil(target))
+            if target > _MAX_DURATION_S:
+                return _fail(f"infeasible: duration: every requirement needs {target / 86400:.1f} d "
+                             f"> {_MAX_DURATION_S / 86400:.0f} d")
+            try:
+                final_maneuver, final_usage, binding = _fit(problem, fam, result.x, target, constraints)
+            except (InfeasibleError, RuntimeError) as exc:
+                return _fail(f"infeasible: {exc}")
+            verified = target <= _FULL_BOUND_MAX_S
+            final_bound = problem.bound(final_maneuver, target, result.period_s, fast=not verified)
+            final_ratios = requirement_ratios(final_bound)
+            _say(f"design: at {target:.0f} s the largest CRLB/requirement is {np.max(final_ratios):.3f}")
+            final_s = float(target)
+            if np.max(final_ratios) <= 1.0:
+                break
+            target *= float(np.max(final_ratios)) ** 2 * 1.01
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    maneuver_path = out / "maneuver.yaml"
+    save_maneuver_file(maneuver_path, final_maneuver,
+                       f"taiji2 design: layout {layout}, family {args.family}, {final_s:.0f} s, seed {args.seed}\n"
+                       f"max CRLB/requirement {np.max(final_ratios):.3f}; maneuver_commander maneuver_file")
+    report: dict[str, Any] = {
+        "layout": layout, "family": args.family, "seed": args.seed, "reference_duration_s": reference_s,
+        "minimize_duration": bool(args.minimize_duration), "shortest_duration_s": (
+            final_s if args.minimize_duration else reference_s * float(np.max(ratios)) ** 2),
+        "shortest_verified": bool(args.minimize_duration and verified),
+        "binding_constraint": binding, "evaluations": result.evaluations,
+        "constraints": {"range_margin": constraints.range_margin, "range_m_s2": problem.range_m_s2,
+                        "max_attitude_rad": constraints.max_attitude_rad, "min_thrust_n": problem.min_thrust_n,
+                        "max_thrust_n": problem.max_thrust_n, "lever_arm_m": problem.lever_arm_m},
+        "design": summary(problem, final_maneuver, final_s, final_usage, final_bound, final_ratios),
+        "design_at_reference": summary(problem, maneuver, reference_s, usage, bound, ratios),
+        "paper": summary(problem, paper, reference_s, paper_usage, paper_bound, paper_ratios),
+        "at_reference": at_reference, "maneuver_file": str(maneuver_path),
+    }
+    report["wall_s"] = time.monotonic() - started
+    write_report(out, report, plots=not args.no_plots)
+    print(f"design {layout} {args.family}: max CRLB/requirement at {reference_s:.0f} s: design "
+          f"{at_reference['design_max']:.3f} ({at_reference['design_binding']}) vs paper "
+          f"{at_reference['paper_max']:.3f} ({at_reference['paper_binding']}), reduction "
+          f"{at_reference['reduction']:.1%}; every requirement met at {report['shortest_duration_s'] / 3600:.2f} h "
+          f"(paper {report['paper']['shortest_duration_all_met_s'] / 3600:.2f} h); binding constraint {binding}; "
+          f"{maneuver_path}, {out / 'report.md'} ({report['wall_s']:.0f} s)")
+    return 0
