@@ -64,8 +64,6 @@ def run_node(make_node: Callable[[], Any], args: Sequence[str] | None = None, pr
     except _shutdown_types():
         pass
     except _user_error_types() as exc:
-        if _stopping(node):
-            return 0
         report_error(program, exc)
         return EXIT_BAD_INPUT
     except Exception as exc:

@@ -13,9 +13,10 @@ import argparse
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 _MAX_DURATION_S = 30 * 86400.0
 _FULL_BOUND_MAX_S = 4 * 3600.0  # longer records are verified with the (conservative) fast bound
@@ -52,6 +53,8 @@ def _say(line: str) -> None:
 
 
 def _fit(problem: Any, fam: Any, x: np.ndarray, duration_s: float, constraints: Any) -> tuple[Any, Any, str]:
+    import numpy as np
+
     """Project x at this duration and check the full simulation; shrink until every limit holds."""
     from taiji2_estimator_pkg.design.optimize import project
 
@@ -70,6 +73,8 @@ def _fit(problem: Any, fam: Any, x: np.ndarray, duration_s: float, constraints: 
 
 def main(args: argparse.Namespace) -> int:
     """Run ``taiji2 design``."""
+    import numpy as np
+
     from taiji2_estimator_pkg.design.evaluate import PARAMETER_NAMES, DesignProblem
     from taiji2_estimator_pkg.design.families import family
     from taiji2_estimator_pkg.design.optimize import Constraints, InfeasibleError, check_feasible, optimize
