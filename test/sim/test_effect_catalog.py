@@ -10,15 +10,18 @@ import pytest
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.effect_catalog import (
     EFFECTS,
+    ActuationDelay,
     ComDrift,
     CrossCoupling,
     EffectParameterError,
     GravityGradient,
+    GrsTimeOffset,
     InertiaError,
     ReadoutNonlinearity,
     ScaleFactorDrift,
     StarTrackerLowFreqNoise,
     ThrusterForceLeakage,
+    ThrusterResponse,
     ThrusterTorqueGain,
     TimeOffset,
     TmStiffness,
@@ -67,6 +70,9 @@ ACTIVE = {
     "gravity_gradient": (lambda: GravityGradient(scale=0.1), {"st", "grs1", "grs2"}),
     "tm_stiffness": (lambda: TmStiffness(1e-5, grs=1, axis="y"), {"grs1"}),
     "thruster_force_leakage": (lambda: ThrusterForceLeakage(np.diag([0.01, 0.0, 0.0])), {"grs1", "grs2"}),
+    "actuation_delay": (lambda: ActuationDelay(0.13), {"st", "grs1", "grs2"}),
+    "thruster_response": (lambda: ThrusterResponse(0.2), {"st", "grs1", "grs2"}),
+    "grs_time_offset": (lambda: GrsTimeOffset(0.05), {"st", "grs1", "grs2"}),
 }
 
 

@@ -36,10 +36,12 @@ from .config_schema import (
     SrpNoiseConfig,
     StarTrackerNoiseConfig,
     ThrusterConfig,
+    TimingConfig,
     VectorNoiseConfig,
     _freeze,
 )
 from .grs import linear_scale_factors_from_angular
+from .timing import GRS_STAMP_CONVENTIONS, grs_stamp_offset_s
 
 __all__ = [
     "NOISE_SOURCE_NAMES",
@@ -54,6 +56,7 @@ __all__ = [
     "SrpNoiseConfig",
     "StarTrackerNoiseConfig",
     "ThrusterConfig",
+    "TimingConfig",
     "VectorNoiseConfig",
     "builtin_layouts",
     "load_config",
@@ -402,6 +405,32 @@ def _parse_noise(section: _Section) -> NoiseConfig:
     return NoiseConfig(**sources)
 
 
+def _parse_timing(root: _Section, dt_s: float) -> TimingConfig:
+    if root.optional("timing") is None:
+        return TimingConfig()
+    section = root.section("timing")
+    stamp = section.optional("grs_stamp")
+    if stamp is None:
+        grs_stamp = 0.0
+    elif isinstance(stamp, str) and stamp in GRS_STAMP_CONVENTIONS:
+        grs_stamp = grs_stamp_offset_s(stamp, dt_s)
+    else:
+        try:
+            grs_stamp = _number(stamp, section.name("grs_stamp"))
+        except ConfigError as error:
+            raise ConfigError(section.name("grs_stamp"), f"must be one of {', '.join(GRS_STAMP_CONVENTIONS)} or "
+                                                         f"a number of seconds, got {stamp!r}") from error
+
+    def seconds(key: str, non_negative: bool = False) -> float:
+        value = section.optional(key)
+        return 0.0 if value is None else _number(value, section.name(key), non_negative=non_negative)
+
+    timing = TimingConfig(grs_stamp, seconds("star_tracker_stamp_offset_s"), seconds("actuation_latency_s"),
+                          seconds("thruster_time_constant_s", non_negative=True))
+    section.finish()
+    return timing
+
+
 def _parse(raw: dict[str, Any], default_name: str) -> SimConfig:
     root = _Section(raw, "")
     layout = root.optional("layout")
@@ -415,6 +444,7 @@ def _parse(raw: dict[str, Any], default_name: str) -> SimConfig:
         maneuver=_parse_maneuver(root.section("maneuver")),
         thrusters=_parse_thrusters(root.section("thrusters")),
         noise=_parse_noise(root.section("noise")),
+        timing=_parse_timing(root, 1.0 / sample_rate_hz),
     )
     root.finish()
     return config

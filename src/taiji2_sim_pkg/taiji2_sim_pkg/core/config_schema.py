@@ -6,7 +6,7 @@ Loading, overrides and validation are in :mod:`.config`, which re-exports everyt
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -24,6 +24,7 @@ __all__ = [
     "SrpNoiseConfig",
     "StarTrackerNoiseConfig",
     "ThrusterConfig",
+    "TimingConfig",
     "VectorNoiseConfig",
 ]
 
@@ -300,6 +301,45 @@ class NoiseConfig:
     star_tracker: StarTrackerNoiseConfig
 
 
+@dataclass(frozen=True)
+class TimingConfig:
+    """Timing conventions of the raw data and the actuation (section ``timing``; :mod:`.timing`).
+
+    Defaults are the simulator's own conventions (and the contract's): a GRS sample stamped t is
+    the mean over (t - dt, t], the star tracker reads the attitude at its stamp, the command stamped
+    t_k acts over (t_k, t_k + dt] at once.
+
+    Attributes
+    ----------
+    grs_stamp : float
+        delta_g: GRS stamp minus the end of its integration interval [s] (``end`` 0, ``midpoint``
+        -dt/2, ``start`` -dt; the YAML also takes these names).
+    star_tracker_stamp_offset_s : float
+        epsilon: the star tracker stamped t read the attitude at t - epsilon [s].
+    actuation_latency_s : float
+        L: the command stamped t_k acts from t_k + L on [s].
+    thruster_time_constant_s : float
+        T: first-order response of the thrust [s] (>= 0).
+    """
+
+    grs_stamp: float = 0.0
+    star_tracker_stamp_offset_s: float = 0.0
+    actuation_latency_s: float = 0.0
+    thruster_time_constant_s: float = 0.0
+
+    @property
+    def reduced(self) -> tuple[float, float, float]:
+        """(command-to-GRS delay D, star-tracker offset against the GRS e, lag T) [s] (:mod:`.timing`)."""
+        return (self.actuation_latency_s + self.grs_stamp, self.star_tracker_stamp_offset_s - self.grs_stamp,
+                self.thruster_time_constant_s)
+
+    @property
+    def is_default(self) -> bool:
+        """True for the simulator's own conventions (all zero)."""
+        return not any((self.grs_stamp, self.star_tracker_stamp_offset_s, self.actuation_latency_s,
+                        self.thruster_time_constant_s))
+
+
 @dataclass(frozen=True, eq=False)
 class SimConfig:
     """Complete simulator configuration (immutable).
@@ -310,8 +350,9 @@ class SimConfig:
         Layout name (``"type1"``, ``"type2"`` or a user name).
     sample_rate_hz : float
         Simulation and readout rate fs [Hz].
-    spacecraft, grs, maneuver, thrusters, noise
-        See the respective classes.
+    spacecraft, grs, maneuver, thrusters, noise, timing
+        See the respective classes (``timing`` optional in a YAML: defaults to the simulator's
+        conventions).
     """
 
     layout: str
@@ -321,6 +362,7 @@ class SimConfig:
     maneuver: ManeuverConfig
     thrusters: ThrusterConfig
     noise: NoiseConfig
+    timing: TimingConfig = field(default_factory=TimingConfig)
 
     def __eq__(self, other: object) -> bool:
         """Value equality (the arrays inside make the generated ``__eq__`` unusable)."""

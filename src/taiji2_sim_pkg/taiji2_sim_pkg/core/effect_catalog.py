@@ -20,6 +20,9 @@ cross_coupling                 TMRF misalignment ``a -> a - eps x a`` (``misalig
                                electrode gain imbalance ``v1 (1 + eta), v2 (1 - eta)``, which
                                couples angular and linear (``imbalance`` [1])
 time_offset                    star tracker stamped ``offset_s`` late: it reads q(t - offset) [s]
+actuation_delay                the applied torque lags the command by ``delay_s`` [s] (any sign)
+thruster_response              first-order lag of the applied torque, ``time_constant_s`` [s]
+grs_time_offset                GRS stamped ``offset_s`` late against the model's convention [s]
 star_tracker_lowfreq_noise     extra star-tracker error, PSD ``S_w f_knee^2 / (f^2 + f_c^2)``
                                (``knee_hz``: where it equals the white level S_w) [Hz]
 thruster_torque_gain           applied torque = (1 + g_k) x (command + noise) per axis (``gain``)
@@ -43,13 +46,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import replace
 from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.signal import bilinear, lfilter
 
-from .config import SimConfig
+from .config import SimConfig, TimingConfig
 from .effects import Effect
 from .frames import cross, quat_from_rotvec, quat_multiply
 from .noise import noise_rng
@@ -59,15 +63,18 @@ __all__ = [
     "EFFECTS",
     "ELECTRODE_PAIRS",
     "LINEAR_READOUTS",
+    "ActuationDelay",
     "ComDrift",
     "CrossCoupling",
     "EffectParameterError",
     "GravityGradient",
+    "GrsTimeOffset",
     "InertiaError",
     "ReadoutNonlinearity",
     "ScaleFactorDrift",
     "StarTrackerLowFreqNoise",
     "ThrusterForceLeakage",
+    "ThrusterResponse",
     "ThrusterTorqueGain",
     "TimeOffset",
     "TmStiffness",
@@ -745,6 +752,76 @@ class TimeOffset(_CatalogEffect):
         return quat_multiply(quat_xyzw, quat_from_rotvec(rotation))
 
 
+class ActuationDelay(_CatalogEffect):
+    """The applied torque lags the command by ``delay_s`` (thruster latency, command transport).
+
+    A timing effect: it adds to ``timing.actuation_latency_s`` and the simulator applies the
+    exact fractional delay (:mod:`.timing`); a negative delay (torque before its command stamp:
+    a command stamped late) needs the whole command series, i.e. batch simulation.
+    """
+
+    name = "actuation_delay"
+    _params = ("delay_s",)
+
+    def __init__(self, delay_s: float = 0.0, enabled: bool = True) -> None:
+        super().__init__(enabled)
+        self.delay_s = _scalar(self.name, "delay_s", delay_s)
+
+    @property
+    def active(self) -> bool:
+        return self.enabled and self.delay_s != 0.0
+
+    def timing(self, timing: TimingConfig) -> TimingConfig:
+        return replace(timing, actuation_latency_s=timing.actuation_latency_s + self.delay_s) if self.active else timing
+
+
+class ThrusterResponse(_CatalogEffect):
+    """First-order response of the thrust, time constant ``time_constant_s`` (rise time 2.2 T).
+
+    A timing effect: it adds to ``timing.thruster_time_constant_s``.
+    """
+
+    name = "thruster_response"
+    _params = ("time_constant_s",)
+
+    def __init__(self, time_constant_s: float = 0.0, enabled: bool = True) -> None:
+        super().__init__(enabled)
+        self.time_constant_s = _scalar(self.name, "time_constant_s", time_constant_s)
+        if self.time_constant_s < 0.0:
+            raise EffectParameterError(self.name, "time_constant_s", f"must be >= 0, got {time_constant_s!r}")
+
+    @property
+    def active(self) -> bool:
+        return self.enabled and self.time_constant_s != 0.0
+
+    def timing(self, timing: TimingConfig) -> TimingConfig:
+        if not self.active:
+            return timing
+        return replace(timing, thruster_time_constant_s=timing.thruster_time_constant_s + self.time_constant_s)
+
+
+class GrsTimeOffset(_CatalogEffect):
+    """GRS samples stamped ``offset_s`` late against the model's convention (both GRS).
+
+    A timing effect: it adds to ``timing.grs_stamp`` (the sample stamped t covers the interval
+    ending at t - grs_stamp).
+    """
+
+    name = "grs_time_offset"
+    _params = ("offset_s",)
+
+    def __init__(self, offset_s: float = 0.0, enabled: bool = True) -> None:
+        super().__init__(enabled)
+        self.offset_s = _scalar(self.name, "offset_s", offset_s)
+
+    @property
+    def active(self) -> bool:
+        return self.enabled and self.offset_s != 0.0
+
+    def timing(self, timing: TimingConfig) -> TimingConfig:
+        return replace(timing, grs_stamp=timing.grs_stamp + self.offset_s) if self.active else timing
+
+
 class StarTrackerLowFreqNoise(_CatalogEffect):
     """Star-tracker error rising at low frequency (random-walk-like, flattened below a corner).
 
@@ -830,7 +907,8 @@ class StarTrackerLowFreqNoise(_CatalogEffect):
 EFFECTS: dict[str, type[Effect]] = {
     cls.name: cls
     for cls in (ScaleFactorDrift, CrossCoupling, TimeOffset, StarTrackerLowFreqNoise, ThrusterTorqueGain,
-                ComDrift, ReadoutNonlinearity, InertiaError, GravityGradient, TmStiffness, ThrusterForceLeakage)
+                ComDrift, ReadoutNonlinearity, InertiaError, GravityGradient, TmStiffness, ThrusterForceLeakage,
+                ActuationDelay, ThrusterResponse, GrsTimeOffset)
 }
 """Effect name -> class (the names of the issue's catalog, plus ``thruster_force_leakage``)."""
 

@@ -15,13 +15,16 @@ Contract (what keeps streaming and batch identical):
 - Torque and inertia hooks get the step start times t_k (the value is held over (t_k, t_{k+1}]);
   sensor-side hooks get the sample times t_{k+1}.
 - Hooks must not modify their input arrays in place; they return new arrays (or the input).
+- Timing effects (a latency, a thruster lag, a GRS stamp offset) change the timing conventions
+  through :meth:`Effect.timing`, which the simulator asks once, before the first step; the
+  simulator implements the resulting timing itself (:mod:`.timing`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .config import SimConfig
+from .config import SimConfig, TimingConfig
 
 __all__ = ["Effect"]
 
@@ -43,6 +46,10 @@ class Effect:
     def to_dict(self) -> dict[str, object]:
         """Parameters for provenance (override to list them)."""
         return {"name": self.name, "type": type(self).__name__}
+
+    def timing(self, timing: TimingConfig) -> TimingConfig:
+        """Timing conventions with this effect (called once, before the first step)."""
+        return timing
 
     # dynamics -------------------------------------------------------------------------------
     def inertia_kg_m2(self, t_s: np.ndarray, inertia_kg_m2: np.ndarray) -> np.ndarray:

@@ -8,6 +8,12 @@ One step advances from t_k to t_{k+1} = t_k + 1/fs with the commanded torque hel
   and linear ``C_i (a_SC,k + omega_dot x d_i + w_m x (w_m x d_i))``, plus readout noise, converted
   to the six electrode voltages through the true scale factors, plus voltage noise.
 
+Timing conventions (``config.timing`` and the timing effects; :mod:`.timing`) are implemented on
+the way in and out: the command drives the thrusters through the exact fractional delay and
+first-order lag (the thruster noise is not filtered: it is the thrusters' own), and a GRS stamp
+offset becomes, equivalently, an extra actuation delay with the star tracker read that much
+earlier (a star-tracker stamp offset, applied after every effect).
+
 A block of n steps is computed by the same code whether n = 1 (streaming) or n = whole run (batch);
 only the attitude solve differs in the order of its floating-point operations (see
 :mod:`.dynamics`), so streaming and batch agree to rounding and their noise draws bitwise.
@@ -22,7 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .config import SimConfig
+from .config import SimConfig, TimingConfig
 from .dynamics import propagate_attitude
 from .effects import Effect
 from .frames import apply_matrix, crf_to_tmrf
@@ -30,6 +36,7 @@ from .grs import coupling_acceleration_m_s2, voltages_from_accelerations
 from .maneuver import SquareWaveManeuver
 from .noise import NoiseStreams
 from .star_tracker import star_tracker_covariance_rad2, star_tracker_measurement
+from .timing import actuation_weights, apply_actuation
 
 __all__ = [
     "SimOutput",
@@ -202,7 +209,26 @@ class Simulator:
         self._crf_to_tmrf = [crf_to_tmrf(s.grs_id, config.grs.alpha_rad) for s in config.grs.sensors]
         self._st_cov_rad2 = star_tracker_covariance_rad2(config.noise.star_tracker.sigma_rad)
         self._effects = tuple(effects)
+        timing = config.timing
         for effect in self._effects:
+            timing = effect.timing(timing)
+        self._timing = timing
+        delay_s, st_offset_s, time_constant_s = timing.reduced
+        self._actuation: tuple[int, np.ndarray] | None = None
+        self._lookahead_steps = 0
+        self._command_history = np.zeros((0, 3))
+        if delay_s != 0.0 or time_constant_s != 0.0:
+            m_first, weights = actuation_weights(delay_s, time_constant_s, self._dt_s)
+            self._actuation = (m_first, weights)
+            self._lookahead_steps = max(-m_first, 0)
+            self._command_history = np.zeros((max(m_first + weights.size - 1, 0), 3))
+        hooks = list(self._effects)
+        if st_offset_s != 0.0:
+            from .effect_catalog import TimeOffset  # the catalog builds on this module's Effect users
+
+            hooks.append(TimeOffset(st_offset_s))
+        self._hooks = tuple(hooks)
+        for effect in self._hooks:
             effect.bind(config, self._seed)
 
     # state and provenance ---------------------------------------------------------------------
@@ -245,6 +271,16 @@ class Simulator:
     def effects(self) -> tuple[Effect, ...]:
         """Injected effects."""
         return self._effects
+
+    @property
+    def timing(self) -> TimingConfig:
+        """Timing conventions in force (configuration plus timing effects)."""
+        return self._timing
+
+    @property
+    def lookahead_steps(self) -> int:
+        """Later commands each step needs (> 0 for a negative total actuation delay: batch only)."""
+        return self._lookahead_steps
 
     def provenance(self) -> dict[str, Any]:
         """Everything needed to reproduce the run: seed, t0, configuration and effects."""
@@ -294,9 +330,9 @@ class Simulator:
         t_start, t_end = times[:-1], times[1:]
         noise = self._noise.draw(count)
 
-        torque = command + noise.thruster_torque_n_m
+        torque = self._actuate(command) + noise.thruster_torque_n_m
         inertia = config.spacecraft.inertia_kg_m2
-        for effect in self._effects:
+        for effect in self._hooks:
             torque = effect.applied_torque_n_m(t_start, torque)
             inertia = effect.inertia_kg_m2(t_start, inertia)
         # the configured J keeps its precomputed inverse; an effect's J is inverted per block
@@ -307,7 +343,7 @@ class Simulator:
         if force_cmd_n is not None:
             force = force + _as_commands("force_cmd_n", force_cmd_n, count)
         a_sc = force / config.spacecraft.mass_kg + noise.srp_m_s2
-        for effect in self._effects:
+        for effect in self._hooks:
             a_sc = effect.spacecraft_acceleration_m_s2(t_start, a_sc)
 
         grs: dict[str, np.ndarray] = {}
@@ -320,7 +356,7 @@ class Simulator:
                 grs[key][:, index] = value
 
         st_quat = star_tracker_measurement(attitude.quat_xyzw, noise.star_tracker_rad)
-        for effect in self._effects:
+        for effect in self._hooks:
             st_quat = effect.star_tracker_quat_xyzw(t_end, st_quat)
 
         self._quat = attitude.quat_xyzw[-1].copy()
@@ -344,6 +380,26 @@ class Simulator:
         )
         return SimOutput(t_end, st_quat, np.tile(self._st_cov_rad2, (count, 1)), grs["voltages"], truth)
 
+    def _actuate(self, command: np.ndarray) -> np.ndarray:
+        """Mean thrust torque over each step from the commands (exact delay and lag; :mod:`.timing`).
+
+        Streaming keeps the commands the filter still needs; with a negative total delay (lookahead)
+        the commands after the block are taken equal to its last one, so only a single batch over
+        the whole run is exact.
+        """
+        if self._actuation is None:
+            return command
+        m_first, weights = self._actuation
+        history = self._command_history
+        count = command.shape[0]
+        lookahead = np.broadcast_to(command[-1], (self._lookahead_steps, 3))
+        padded = np.concatenate((history, command, lookahead))
+        head = history.shape[0]
+        out = apply_actuation(padded, head, count, m_first, weights)
+        if head:
+            self._command_history = np.concatenate((history, command))[-head:]
+        return out
+
     def _grs_block(self, index: int, grs_id: int, t_end: np.ndarray, omega_dot: np.ndarray,
                    omega_mid: np.ndarray, a_sc: np.ndarray, noise: Any) -> dict[str, np.ndarray]:
         """Readouts of one GRS over a block (arrays with leading axis n)."""
@@ -352,7 +408,7 @@ class Simulator:
         crf_to_tmrf_i = self._crf_to_tmrf[index]
         com_offset = sensor.com_offset_m
         angular_sf, linear_sf = sensor.angular_scale_factors, sensor.linear_scale_factors
-        for effect in self._effects:
+        for effect in self._hooks:
             com_offset = effect.com_offset_m(t_end, grs_id, com_offset)
         coupling = coupling_acceleration_m_s2(omega_dot, omega_mid, com_offset)
         angular_true = apply_matrix(crf_to_tmrf_i, omega_dot)
@@ -361,12 +417,12 @@ class Simulator:
         angular_meas = angular_true + noise.lfs_rotational_rad_s2[:, index]
         linear_meas = (linear_true + noise.lfs_translational_m_s2[:, index]
                        + noise.tm_environment_m_s2[:, index])
-        for effect in self._effects:
+        for effect in self._hooks:
             angular_meas, linear_meas = effect.grs_accelerations(t_end, grs_id, angular_meas, linear_meas)
             angular_sf, linear_sf = effect.grs_scale_factors(t_end, grs_id, angular_sf, linear_sf)
         voltages = voltages_from_accelerations(angular_meas, linear_meas, angular_sf, linear_sf)
         voltages = voltages + noise.grs_voltage_v[:, index]
-        for effect in self._effects:
+        for effect in self._hooks:
             voltages = effect.grs_voltages_v(t_end, grs_id, voltages)
         return {
             "angular_true": angular_true,
