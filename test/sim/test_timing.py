@@ -21,7 +21,7 @@ def test_pure_delay_is_linear_interpolation(delay):
     commands = np.random.default_rng(3).normal(size=(40, 3))
     out = actuated_commands(commands, delay, 0.0, DT)
     whole, fraction = divmod(delay / DT, 1.0)
-    whole = int(round(whole)) if abs(fraction - 1.0) > 1e-12 else int(round(whole)) + 1
+    whole = round(whole) if abs(fraction - 1.0) > 1e-12 else round(whole) + 1
     fraction = 0.0 if abs(fraction - 1.0) < 1e-12 else fraction
     padded = np.vstack([np.zeros((5, 3)), commands, np.repeat(commands[-1:], 5, axis=0)])
     k = np.arange(40) + 5
@@ -57,9 +57,9 @@ def test_config_timing_section_and_errors():
     assert config.timing.grs_stamp == pytest.approx(-0.05)
     assert config.timing.reduced == pytest.approx((0.05, 0.05, 0.0))
     assert load_config(config.to_dict()).timing == config.timing
-    with pytest.raises(ConfigError, match="timing.grs_stamp"):
+    with pytest.raises(ConfigError, match=r"timing\.grs_stamp"):
         load_config("type1", {"timing.grs_stamp": "begin"})
-    with pytest.raises(ConfigError, match="timing.thruster_time_constant_s"):
+    with pytest.raises(ConfigError, match=r"timing\.thruster_time_constant_s"):
         load_config("type1", {"timing.thruster_time_constant_s": -1.0})
 
 

@@ -16,6 +16,9 @@ scale_factor_drift[grs.pair]            angular and linear readout of the pair t
 cross_coupling[grs.misalign_c]          ``-e_c x a`` on every angular and linear readout (TMRF)
 cross_coupling[grs.imbalance_e]         angular ``+= l^data_e / r``, linear ``+= r alpha^pred_e``
 time_offset                             star-tracker attitude ``-omega``
+actuation_delay                         torque channel ``+ J^-1 (tau_act(D0 + tau) - tau_act(D0))``
+thruster_response                       torque channel ``+ J^-1 (tau_act(T0 + T) - tau_act(T0))``
+grs_time_offset                         actuation_delay(delta) + star-tracker attitude ``+omega delta``
 thruster_torque_gain[k]                 torque channel ``+ J^-1 e_k tau_cmd,k``
 com_drift[grs|both.c]                   linear ``+ tc (alpha^pred x e_c)`` of the GRS concerned
 readout_nonlinearity[grs.readout]       readout ``+ k m^2 - 2 k^2 m^3 + 5 k^3 m^4 - 14 k^4 m^5``
@@ -28,6 +31,13 @@ tm_stiffness[grs.c]                     linear readout ``- H(s) l^data``
 thruster_force_leakage[c.k]             spacecraft acceleration ``+ e_c tau_cmd,k / M``
 star_tracker_lowfreq_noise              star-tracker channel PSD ``+ f_knee^2 x template``
 ======================================  ==========================================================
+
+``tau_act`` is the exact mean thrust over each sample interval for a delay D and a lag T
+(:func:`taiji2_sim_pkg.core.timing.actuated_commands`); D0, T0 are the model's timing. A delay
+moves the thrust of a zero-order-hold command between neighbouring samples: its signature is
+exactly piecewise linear in the delay with kinks at whole samples, so the timing candidates are
+fitted, like the nonlinearity, by an exact one-parameter scan: their series columns are the
+signatures at knots (whole and half samples, and the model's own value), interpolated linearly.
 
 Regressors are noise-free predictions wherever the measured quantity carries the noise of a
 channel the column enters with the same sign structure (errors-in-variables bias, see
@@ -53,15 +63,21 @@ from taiji2_sim_pkg.core.effect_catalog import (
 )
 from taiji2_sim_pkg.core.frames import cross
 
-from .channels import Linearization, Readouts, perturbation_channels
+from .channels import TIMING_REACH_S, Linearization, Readouts, actuated_torque, perturbation_channels
 from .model import NominalModel
 
-__all__ = ["FAMILIES", "Candidate", "CandidateContext", "NoiseCandidate", "candidate_catalog"]
+__all__ = ["FAMILIES", "TIMING_FAMILIES", "Candidate", "CandidateContext", "NoiseCandidate", "candidate_catalog"]
 
 FAMILIES = ("scale_factor_drift", "cross_coupling", "time_offset", "star_tracker_lowfreq_noise",
             "thruster_torque_gain", "com_drift", "readout_nonlinearity", "inertia_error", "gravity_gradient",
-            "tm_stiffness", "thruster_force_leakage")
+            "tm_stiffness", "thruster_force_leakage", "actuation_delay", "thruster_response", "grs_time_offset")
 """Effect families the diagnosis knows (the catalog of the simulator)."""
+
+TIMING_FAMILIES = ("time_offset", "actuation_delay", "thruster_response", "grs_time_offset")
+"""Families that are timing conventions (stamps, latency, thrust response), not physics."""
+
+DELAY_RANGE_S = TIMING_REACH_S
+"""Timing candidates are scanned over +-0.5 s around the model's delay (and 0 .. 1 s of lag)."""
 
 _AXES = "xyz"
 
@@ -121,6 +137,9 @@ class Candidate:
         ``coefficients(theta) -> (m,)`` weights of the series columns.
     bound : callable or None
         ``bound(ctx) -> |theta| max`` where the series holds (for the nonlinearity: k a_max = 0.2).
+    grid : numpy.ndarray or None
+        Magnitudes the exact scan visits (timing candidates: their knot range); None: around the
+        linear estimate.
     """
 
     name: str
@@ -132,6 +151,12 @@ class Candidate:
     series: Callable[[CandidateContext], list[np.ndarray]] | None = None
     coefficients: Callable[[float], np.ndarray] | None = None
     bound: Callable[[CandidateContext], float] | None = None
+    grid: np.ndarray | None = None
+
+    @property
+    def is_timing(self) -> bool:
+        """A timing convention rather than a physical effect."""
+        return self.name in TIMING_FAMILIES
 
     def series_names(self) -> list[str]:
         """Names of the series columns."""
@@ -441,9 +466,86 @@ def _force_leakage(force_axis: int, torque_axis: int) -> Candidate:
                      "1/m", build, inject)
 
 
+def _actuation_change(ctx: CandidateContext, delay_s: float, time_constant_s: float) -> np.ndarray:
+    """Torque-channel change (n, 15) when the thrust follows (D, T) instead of the model's timing."""
+    model, raw = ctx.model, ctx.readouts.torque_raw_n_m
+    if delay_s == model.delay_s and time_constant_s == model.time_constant_s:
+        return np.zeros((raw.shape[0], 15))
+    moved = actuated_torque(raw, delay_s, time_constant_s, ctx.readouts.dt_s)
+    return _torque_column(ctx, moved - ctx.readouts.torque_cmd_n_m)
+
+
+def _knot_candidate(name: str, param: str, knots: np.ndarray,
+                    channels_at: Callable[[CandidateContext, float], np.ndarray],
+                    inject: Callable[[np.ndarray, NominalModel], dict[str, Any]]) -> Candidate:
+    """A one-parameter candidate whose signature is the linear interpolation of its knot signatures."""
+    knots = np.unique(np.append(knots, 0.0))
+    nonzero = knots[knots != 0.0]
+    step = float(np.min(np.diff(knots)))
+
+    def coefficients(theta: float) -> np.ndarray:
+        # hat functions: the weight of each non-zero knot at theta (the zero knot's column is zero)
+        return np.array([np.interp(theta, knots, (knots == knot).astype(float)) for knot in nonzero])
+
+    def series(ctx: CandidateContext) -> list[np.ndarray]:
+        return [channels_at(ctx, float(knot)) for knot in nonzero]
+
+    def build(ctx: CandidateContext) -> list[np.ndarray]:
+        # the central secant over one knot step about 0 (exact where the signature is linear)
+        half = 0.5 * step
+        return [(channels_at(ctx, half) - channels_at(ctx, -half)) / step if knots[0] < 0.0
+                else channels_at(ctx, step) / step]
+
+    grid = np.unique(np.concatenate([np.linspace(knots[0], knots[-1], 2001), knots]))
+    return Candidate(name, "", (param,), "s", build, inject, series, coefficients, None, grid)
+
+
+def _actuation_delay(model_delay_s: float, dt_s: float) -> Candidate:
+    absolute = np.arange(math.floor((model_delay_s - DELAY_RANGE_S) / (0.5 * dt_s)),
+                         math.ceil((model_delay_s + DELAY_RANGE_S) / (0.5 * dt_s)) + 1) * 0.5 * dt_s
+
+    def channels_at(ctx: CandidateContext, tau: float) -> np.ndarray:
+        return _actuation_change(ctx, ctx.model.delay_s + tau, ctx.model.time_constant_s)
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "actuation_delay", "delay_s": float(theta[0])}
+
+    return _knot_candidate("actuation_delay", "delay_s", absolute - model_delay_s, channels_at, inject)
+
+
+def _grs_time_offset(model_delay_s: float, dt_s: float) -> Candidate:
+    absolute = np.arange(math.floor((model_delay_s - DELAY_RANGE_S) / (0.5 * dt_s)),
+                         math.ceil((model_delay_s + DELAY_RANGE_S) / (0.5 * dt_s)) + 1) * 0.5 * dt_s
+
+    def channels_at(ctx: CandidateContext, delta: float) -> np.ndarray:
+        # GRS stamped delta late = the physics delayed by delta, the star tracker read delta early
+        torque = _actuation_change(ctx, ctx.model.delay_s + delta, ctx.model.time_constant_s)
+        return torque + perturbation_channels(ctx.lin, ctx.model, datt=delta * ctx.lin.omega)
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "grs_time_offset", "offset_s": float(theta[0])}
+
+    return _knot_candidate("grs_time_offset", "offset_s", absolute - model_delay_s, channels_at, inject)
+
+
+def _thruster_response(model_time_constant_s: float) -> Candidate:
+    absolute = np.array([0.0, 0.0125, 0.025, 0.0375, 0.05, 0.075, 0.1, 0.125, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5,
+                         0.7, 1.0])
+    absolute = np.unique(np.append(absolute[absolute + 1e-12 >= 0.0], model_time_constant_s))
+
+    def channels_at(ctx: CandidateContext, extra: float) -> np.ndarray:
+        return _actuation_change(ctx, ctx.model.delay_s, max(ctx.model.time_constant_s + extra, 0.0))
+
+    def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
+        return {"name": "thruster_response", "time_constant_s": float(theta[0])}
+
+    return _knot_candidate("thruster_response", "time_constant_s", absolute - model_time_constant_s, channels_at,
+                           inject)
+
+
 def candidate_catalog(families: Sequence[str] | None = None, orbit_period_s: float = 86164.1,
                       suspension_hz: float = 0.01, damping: float = 0.7, st_corner_hz: float = 1e-5,
-                      ) -> tuple[list[Candidate], NoiseCandidate | None]:
+                      model: NominalModel | None = None) -> tuple[list[Candidate], NoiseCandidate | None]:
     """All variants of the chosen effect families.
 
     Parameters
@@ -456,6 +558,9 @@ def candidate_catalog(families: Sequence[str] | None = None, orbit_period_s: flo
         Suspension of the tm_stiffness candidate.
     st_corner_hz : float
         Corner of the star-tracker low-frequency noise candidate [Hz].
+    model : NominalModel, optional
+        The nominal model, whose timing the timing candidates start from (default: the simulator's
+        conventions at 10 Hz).
 
     Returns
     -------
@@ -468,6 +573,9 @@ def candidate_catalog(families: Sequence[str] | None = None, orbit_period_s: flo
     unknown = [name for name in chosen if name not in FAMILIES]
     if unknown:
         raise ValueError(f"unknown candidate effect(s) {unknown}; known: {', '.join(FAMILIES)}")
+    delay_s = model.delay_s if model is not None else 0.0
+    time_constant_s = model.time_constant_s if model is not None else 0.0
+    dt_s = model.dt_s if model is not None else 0.1
     out: list[Candidate] = []
     for family in chosen:
         if family == "scale_factor_drift":
@@ -492,5 +600,11 @@ def candidate_catalog(families: Sequence[str] | None = None, orbit_period_s: flo
             out += [_tm_stiffness(g, a, suspension_hz, damping) for g in range(2) for a in range(3)]
         elif family == "thruster_force_leakage":
             out += [_force_leakage(c, k) for c in range(3) for k in range(3)]
+        elif family == "actuation_delay":
+            out.append(_actuation_delay(delay_s, dt_s))
+        elif family == "thruster_response":
+            out.append(_thruster_response(time_constant_s))
+        elif family == "grs_time_offset":
+            out.append(_grs_time_offset(delay_s, dt_s))
     noise = NoiseCandidate(corner_hz=st_corner_hz) if "star_tracker_lowfreq_noise" in chosen else None
     return out, noise

@@ -30,11 +30,13 @@ acceleration), mapped to the channels by :func:`perturbation_channels`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from taiji2_sim_pkg.core.frames import cross, quat_conjugate, quat_multiply, rotvec_from_quat
+from taiji2_sim_pkg.core.timing import actuated_commands
 
 from .inputs import DiagnosisInput
 from .model import ANGULAR_TO_LINEAR, NominalModel
@@ -43,13 +45,16 @@ __all__ = [
     "CHANNELS",
     "GROUPS",
     "N_CHANNELS",
+    "TIMING_REACH_S",
     "Linearization",
     "Readouts",
+    "actuated_torque",
     "linearize",
     "nuisance_column",
     "nuisance_names",
     "perturbation_channels",
     "readouts_from_input",
+    "torque_edges",
 ]
 
 GROUPS = ("st", "torque", "ang_diff", "lin_common", "lin_diff")
@@ -58,6 +63,10 @@ N_CHANNELS = len(CHANNELS)
 ST, TORQUE, ANG_DIFF, LIN_COMMON, LIN_DIFF = (slice(3 * i, 3 * i + 3) for i in range(5))
 WRAP_SAMPLES = {"st": 2, "lin_common": 1}
 """Leading samples of the channels with memory that the fit frees (impulse columns)."""
+
+TIMING_REACH_S = 0.5
+"""Largest delay change [s] the timing candidates consider: the torque channel is set to zero over
+the samples at either end of the record whose thrust would then depend on commands outside it."""
 
 
 @dataclass(frozen=True)
@@ -77,9 +86,12 @@ class Readouts:
     dinc : numpy.ndarray
         (n, 3) ``(inc_j - inc_{j-1}) / dt^2`` (rows 0, 1 zero) [rad s^-2].
     torque_cmd_n_m : numpy.ndarray
-        (n, 3) commanded torque [N m].
+        (n, 3) mean thrust torque over each sample's interval that the model's timing gives the
+        commands (the commands themselves with the default timing) [N m].
     dt_s : float
         Sample interval [s].
+    torque_raw_n_m : numpy.ndarray
+        (n, 3) commanded torque held over each sample's interval, as recorded [N m].
     """
 
     t_s: np.ndarray
@@ -89,6 +101,7 @@ class Readouts:
     dinc: np.ndarray
     torque_cmd_n_m: np.ndarray
     dt_s: float
+    torque_raw_n_m: np.ndarray
 
     @property
     def n(self) -> int:
@@ -96,8 +109,8 @@ class Readouts:
         return int(self.t_s.shape[0])
 
 
-def readouts_from_input(inp: DiagnosisInput) -> Readouts:
-    """Voltage combinations and star-tracker increments of an input."""
+def readouts_from_input(inp: DiagnosisInput, model: NominalModel) -> Readouts:
+    """Voltage combinations, star-tracker increments and actuated torque of an input."""
     volts = inp.voltages_v
     first, second = volts[..., 0::2], volts[..., 1::2]
     u = (first - second)[..., [1, 2, 0]]  # (phi: y pair, theta: z pair, psi: x pair)
@@ -109,7 +122,30 @@ def readouts_from_input(inp: DiagnosisInput) -> Readouts:
     dinc = np.zeros((inp.n, 3))
     if inp.n > 2:
         dinc[2:] = (inc[2:] - inc[1:-1]) / inp.dt_s ** 2
-    return Readouts(inp.t_s, u, s, inc, dinc, inp.torque_cmd_n_m, inp.dt_s)
+    actuated = actuated_torque(inp.torque_cmd_n_m, model.delay_s, model.time_constant_s, inp.dt_s)
+    return Readouts(inp.t_s, u, s, inc, dinc, actuated, inp.dt_s, inp.torque_cmd_n_m)
+
+
+def actuated_torque(torque_cmd_n_m: np.ndarray, delay_s: float, time_constant_s: float, dt_s: float) -> np.ndarray:
+    """Mean thrust torque over each sample's interval (n, 3) [N m] from the per-sample commands.
+
+    The recorded command of a sample is the one held over its interval; with a delay D and a lag T
+    the thrust over that interval mixes neighbouring commands exactly
+    (:func:`~taiji2_sim_pkg.core.timing.actuated_commands`).
+    Before the record the thrusters are taken idle, after it the last command held; the samples
+    this guess touches are left out of the torque channel (:func:`torque_edges`).
+    """
+    if delay_s == 0.0 and time_constant_s == 0.0:
+        return torque_cmd_n_m
+    return actuated_commands(torque_cmd_n_m, delay_s, time_constant_s, dt_s)
+
+
+def torque_edges(model: NominalModel, n: int) -> tuple[int, int]:
+    """Samples at the start and at the end of the torque channel set to zero: those whose thrust,
+    under the model's delay changed by up to :data:`TIMING_REACH_S`, needs commands outside the record."""
+    head = math.ceil((max(model.delay_s, 0.0) + TIMING_REACH_S) / model.dt_s) + 1
+    tail = math.ceil((max(-model.delay_s, 0.0) + TIMING_REACH_S) / model.dt_s) + 1
+    return min(head, n), min(tail, max(n - head, 0))
 
 
 @dataclass(frozen=True)
@@ -145,6 +181,8 @@ class Linearization:
     lhat_pred : numpy.ndarray
         (n, 2, 3) predicted linear acceleration ``C_i A~(acc_pred, w) d_i`` (no spacecraft
         acceleration: that is noise), TMRF [m s^-2].
+    torque_edges : tuple of int
+        Samples at the start and end left out of the torque channel (:func:`torque_edges`).
 
     Notes
     -----
@@ -168,6 +206,7 @@ class Linearization:
     acc_pred: np.ndarray
     ghat_pred: np.ndarray
     lhat_pred: np.ndarray
+    torque_edges: tuple[int, int] = (0, 0)
 
     @property
     def d_mean(self) -> np.ndarray:
@@ -244,6 +283,10 @@ def linearize(readouts: Readouts, model: NominalModel, g_angular: np.ndarray,
     channels = np.zeros((n, 15))
     channels[:, ST] = readouts.dinc
     channels[1:, ST] -= 0.5 * (m[1:] + m[:-1])
+    if model.st_offset_s != 0.0 and n > 2:
+        # the star tracker stamped t read q(t - e): its attitude lags by -omega e (the time_offset
+        # signature), which the model's timing takes back
+        channels[2:, ST] += model.st_offset_s * (omega[2:] - 2.0 * omega[1:-1] + omega[:-2]) / dt ** 2
     inertia = model.inertia_kg_m2
     predicted = (readouts.torque_cmd_n_m - cross(w_mid, w_mid @ inertia.T)) @ model.inertia_inv.T
     channels[:, TORQUE] = m - predicted
@@ -253,16 +296,21 @@ def linearize(readouts: Readouts, model: NominalModel, g_angular: np.ndarray,
     common = 0.5 * (l_crf[:, 0] + l_crf[:, 1]) - _coupling(m, w_mid, d_mean)
     channels[:, LIN_COMMON] = _prewhiten_common(common, model.srp_decay)
     channels[:, LIN_DIFF] = l_crf[:, 0] - l_crf[:, 1] - _coupling(m, w_mid, d_diff)
-    _zero_wrap(channels)
+    edges = torque_edges(model, n)
+    _zero_wrap(channels, edges)
     ghat_pred = np.einsum("gij,nj->ngi", model.c_tmrf, predicted)
     lhat_pred = np.stack([_coupling(predicted, w_mid, d[g]) @ model.c_tmrf[g].T for g in range(2)], axis=1)
     return Linearization(g_angular, d, ghat, lhat, g_crf, l_crf, m, omega, w_mid, channels, predicted,
-                         ghat_pred, lhat_pred)
+                         ghat_pred, lhat_pred, edges)
 
 
-def _zero_wrap(channels: np.ndarray) -> None:
+def _zero_wrap(channels: np.ndarray, edges: tuple[int, int]) -> None:
     channels[: WRAP_SAMPLES["st"], ST] = 0.0
     channels[: WRAP_SAMPLES["lin_common"], LIN_COMMON] = 0.0
+    head, tail = edges
+    channels[:head, TORQUE] = 0.0
+    if tail:
+        channels[-tail:, TORQUE] = 0.0
 
 
 def perturbation_channels(lin: Linearization, model: NominalModel, dg: np.ndarray | None = None,
@@ -320,7 +368,7 @@ def perturbation_channels(lin: Linearization, model: NominalModel, dg: np.ndarra
         out[:, LIN_COMMON] = _prewhiten_common(common, model.srp_decay)
     if diff is not None:
         out[:, LIN_DIFF] = diff
-    _zero_wrap(out)
+    _zero_wrap(out, lin.torque_edges)
     return out
 
 
@@ -380,12 +428,12 @@ def nuisance_column(lin: Linearization, model: NominalModel, name: str) -> np.nd
         coupling = _coupling(lin.acc_pred, lin.w_mid, unit)
         column[:, LIN_COMMON] = _prewhiten_common(0.5 * coupling, model.srp_decay)
         column[:, LIN_DIFF] = coupling if grs == 0 else -coupling
-        _zero_wrap(column)
+        _zero_wrap(column, lin.torque_edges)
         return column
     if kind == "trend":
         index = CHANNELS.index(rest[0])
         column[:, index] = (np.arange(n) - 0.5 * (n - 1)) / max(n, 1)
-        _zero_wrap(column)
+        _zero_wrap(column, lin.torque_edges)
         return column
     if kind == "wrap":
         column[int(rest[1]), CHANNELS.index(rest[0])] = 1.0

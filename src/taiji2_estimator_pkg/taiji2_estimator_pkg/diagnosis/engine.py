@@ -426,7 +426,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
         return _insufficient(result, f"the data determine the scale factors only to {np.max(sigma_g):.2g} "
                                      f"(relative, 1 sigma); {options.max_relative_sigma_g:g} needed")
     candidates, noise = candidate_catalog(options.candidates, options.orbit_period_s, options.suspension_hz,
-                                          options.damping, options.st_corner_hz)
+                                          options.damping, options.st_corner_hz, model)
     t_mid = float(0.5 * (inp.t_s[0] + inp.t_s[-1]))
     for iteration in range(max(1, options.calibration_iterations)):
         say(f"building the signatures of {len(candidates)} candidate variants")
@@ -741,7 +741,7 @@ def variant_sensitivities(inp: DiagnosisInput, nominal: NominalModel | SimConfig
     settings = _settings(options)
     g, d, _, _ = calibrate(inp, model, settings, max(2, options.calibration_iterations), lambda message: None)
     candidates, noise = candidate_catalog(options.candidates, options.orbit_period_s, options.suspension_hz,
-                                          options.damping, options.st_corner_hz)
+                                          options.damping, options.st_corner_hz, model)
     t_mid = float(0.5 * (inp.t_s[0] + inp.t_s[-1]))
     record = Record(inp, model, g, d, settings, candidates, t_mid)
     out: dict[str, float] = {}

@@ -62,6 +62,14 @@ class NominalModel:
         (2, 3) linear readout noise (LFS translational + TM environment + voltage), TMRF [m^2 s^-4].
     layout : str
         Layout name.
+    delay_s : float
+        Command-to-GRS delay D of the data's timing conventions [s] (layout section ``timing``,
+        reduced: actuation latency plus GRS stamp offset; :mod:`taiji2_sim_pkg.core.timing`).
+    st_offset_s : float
+        Star-tracker stamp offset against the GRS e [s] (the star tracker stamped t read the
+        attitude at t - e).
+    time_constant_s : float
+        First-order thruster response T [s].
     """
 
     sample_rate_hz: float
@@ -81,6 +89,9 @@ class NominalModel:
     var_angular: np.ndarray
     var_linear: np.ndarray
     layout: str
+    delay_s: float = 0.0
+    st_offset_s: float = 0.0
+    time_constant_s: float = 0.0
 
     @property
     def dt_s(self) -> float:
@@ -140,6 +151,7 @@ class NominalModel:
         var_st = (np.asarray(noise.star_tracker.sigma_rad, dtype=np.float64) ** 2 if noise.star_tracker.enabled
                   else np.zeros(3))
         inertia = np.array(config.spacecraft.inertia_kg_m2, dtype=np.float64)
+        delay_s, st_offset_s, time_constant_s = config.timing.reduced
         return cls(
             sample_rate_hz=float(fs),
             inertia_kg_m2=inertia,
@@ -158,6 +170,9 @@ class NominalModel:
             var_angular=lfs_rot[None, :] + var_voltage_angular,
             var_linear=(lfs_trans + environment)[None, :] + var_voltage_linear,
             layout=str(config.layout),
+            delay_s=float(delay_s),
+            st_offset_s=float(st_offset_s),
+            time_constant_s=float(time_constant_s),
         )
 
     def summary(self) -> dict[str, object]:
@@ -173,6 +188,8 @@ class NominalModel:
             "maneuver_period_s": self.maneuver_period_s,
             "star_tracker_sigma_rad": np.sqrt(self.var_st).tolist(),
             "thruster_torque_asd_n_m_rthz": np.sqrt(self.var_torque / (0.5 * self.sample_rate_hz)).tolist(),
+            "timing": {"delay_s": self.delay_s, "st_offset_s": self.st_offset_s,
+                       "time_constant_s": self.time_constant_s},
             "srp_decay_per_step": self.srp_decay,
             "srp_corner_hz": (-math.log(self.srp_decay) * self.sample_rate_hz / (2 * math.pi)
                               if 0.0 < self.srp_decay < 1.0 else None),

@@ -77,7 +77,7 @@ class Record:
         self.inp = inp
         self.model = model
         self.settings = settings
-        self.readouts = readouts_from_input(inp)
+        self.readouts = readouts_from_input(inp, model)
         self.lin: Linearization = linearize(self.readouts, model, g_angular, com_offset_m)
         self.n = inp.n
         self.k_max = _k_max(self.n, model.sample_rate_hz, settings.f_max_hz)
@@ -156,8 +156,11 @@ class Record:
 
     @staticmethod
     def _secant_weights(candidate: Candidate, value: float) -> np.ndarray:
-        size = len(candidate.coefficients(1.0))
         if value == 0.0:
+            if candidate.grid is not None:  # knot signatures: the central secant about 0
+                step = 0.5 * float(np.min(np.abs(np.diff(candidate.grid))))
+                return (candidate.coefficients(step) - candidate.coefficients(-step)) / (2.0 * step)
+            size = len(candidate.coefficients(1.0))
             return candidate.coefficients(1.0) * (np.arange(size) == 0)
         return candidate.coefficients(value) / value
 
@@ -187,16 +190,19 @@ class Record:
             v = coefficients(value)
             return chi2_others - 2.0 * float(v @ b) + float(v @ m @ v)
 
-        limit = candidate.bound(self.ctx) if candidate.bound is not None else np.inf
-        linear = float(b[0] / m[0, 0]) if m[0, 0] > 0 else 0.0
-        sigma = 1.0 / math.sqrt(max(m[0, 0], 1e-300))
-        width = min(max(300.0 * sigma, 5.0 * abs(linear)), 2.0 * limit) if np.isfinite(limit) else \
-            max(300.0 * sigma, 5.0 * abs(linear))
-        ramp = np.linspace(-1.0, 1.0, 2001)
-        grid = linear + width * np.sign(ramp) * ramp ** 2
-        if np.isfinite(limit):
-            grid = grid[np.abs(grid) <= limit]
-            grid = np.append(grid, 0.0) if grid.size else np.array([0.0])
+        if candidate.grid is not None:
+            grid = candidate.grid
+        else:
+            limit = candidate.bound(self.ctx) if candidate.bound is not None else np.inf
+            linear = float(b[0] / m[0, 0]) if m[0, 0] > 0 else 0.0
+            sigma = 1.0 / math.sqrt(max(m[0, 0], 1e-300))
+            width = min(max(300.0 * sigma, 5.0 * abs(linear)), 2.0 * limit) if np.isfinite(limit) else \
+                max(300.0 * sigma, 5.0 * abs(linear))
+            ramp = np.linspace(-1.0, 1.0, 2001)
+            grid = linear + width * np.sign(ramp) * ramp ** 2
+            if np.isfinite(limit):
+                grid = grid[np.abs(grid) <= limit]
+                grid = np.append(grid, 0.0) if grid.size else np.array([0.0])
         weights = np.stack([coefficients(v) for v in grid])
         values = chi2_others - 2.0 * weights @ b + np.einsum("gi,ij,gj->g", weights, m, weights)
         best = int(np.argmin(values))
@@ -374,7 +380,7 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
     """
     g = model.g_angular.copy()
     d = model.com_offset_m.copy()
-    readouts = readouts_from_input(inp)
+    readouts = readouts_from_input(inp, model)
     n = inp.n
     k_max = _k_max(n, model.sample_rate_hz, settings.f_max_hz)
     bins = np.arange(1, k_max + 1)
