@@ -474,6 +474,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
         return locations, count, threshold, residual
 
     say("scanning the residual channels (where)")
+    result.calibration["readout_response"] = full.response(nuisance, theta_n)[1].to_dict()
     before, tests, threshold, residual_before = scan(nuisance, theta_n, 0.0)
     result.locations, result.location_tests, result.location_threshold = before, tests, threshold
     lap("locations")
@@ -530,6 +531,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
             full.refine(candidate, [name for name in current if name not in names])
     theta_final, cov_final, chi2_final = full.fit(current)
     say("scanning the residual with the accepted effects")
+    result.calibration["readout_response_final"] = full.response(current, theta_final)[1].to_dict()
     after, _, _, residual_after = scan(current, theta_final, full.kappa)
     result.locations_after = after
     significant_before = [loc for loc in before if loc.significant]

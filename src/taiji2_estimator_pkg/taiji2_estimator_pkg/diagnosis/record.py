@@ -13,6 +13,7 @@ from scipy.optimize import minimize_scalar
 
 from .candidates import Candidate, CandidateContext
 from .channels import Linearization, linearize, nuisance_column, nuisance_names, readouts_from_input
+from .dynamics import ResponseFit, fit_response
 from .inputs import DiagnosisInput
 from .model import NominalModel
 from .spectral import Design, NoiseSpectrum, Whitener, dft
@@ -98,6 +99,7 @@ class Record:
         self.st_template = self.spectrum.st_template(self.bins, settings.st_corner_hz)
         self.kappa = 0.0
         self.secant: dict[str, float] = {}
+        self._torque_psd: np.ndarray | None = None
         self.whitener: Whitener
         self.design: Design
         self.rebuild(0.0)
@@ -281,7 +283,12 @@ class Record:
         return self._candidate_columns(candidate)[candidate.params.index(param)]
 
     def residual_time(self, names: Sequence[str], theta: np.ndarray) -> np.ndarray:
-        """(n, 15) residual channels after the fitted columns (all frequencies)."""
+        """(n, 15) residual channels after the fitted columns and the chain's high-frequency response
+        (all frequencies; :mod:`.dynamics`)."""
+        return self.response(names, theta)[0]
+
+    def response(self, names: Sequence[str], theta: np.ndarray) -> tuple[np.ndarray, ResponseFit]:
+        """Residual channels after the fitted columns, with the response fitted and removed, and that fit."""
         out = self.lin.channels.copy()
         built: dict[str, list[np.ndarray]] = {}
         for name, value in zip(names, theta, strict=True):
@@ -295,7 +302,13 @@ class Record:
             if key not in built:
                 built[key] = self._candidate_columns(candidate)
             out -= value * built[key][candidate.params.index(param)]
-        return out
+        if self._torque_psd is None:
+            self._torque_psd = self.spectrum.marginal(np.arange(1, self.n // 2 + 1))[:, 3:6]
+        # the model's prediction of the angular acceleration with the fitted columns (timing included):
+        # m - residual = acc_pred + sum of the columns' torque parts, free of the channel's noise
+        predicted = self.lin.m - out[:, 3:6]
+        return fit_response(out, predicted, self.lin.torque_edges, self.model.dt_s, self.settings.f_max_hz,
+                            self._torque_psd)
 
     def marginal(self, kappa: float | None = None) -> np.ndarray:
         """(K, 15) per-channel spectrum at the fit bins with the star-tracker extra ``kappa``."""
