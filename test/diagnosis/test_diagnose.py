@@ -96,7 +96,7 @@ def test_effect_outside_the_candidates_is_unexplained():
     result = diagnose(inp, config, options)
     assert result.verdict["unexplained"] is True
     assert result.verdict["effects"] == []
-    assert "remaining at" in result.verdict["summary"]
+    assert result.verdict["summary"].startswith("unexplained gap at ")  # where first, no name
     assert any(loc["channel"].startswith("ang_diff") for loc in result.verdict["remaining"])
 
 

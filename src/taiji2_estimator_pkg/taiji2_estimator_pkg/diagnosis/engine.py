@@ -34,7 +34,7 @@ from scipy.stats import chi2 as chi2_dist
 
 from taiji2_sim_pkg.core.config import SimConfig
 
-from .candidates import Candidate, NoiseCandidate, candidate_catalog
+from .candidates import TIMING_FAMILIES, Candidate, NoiseCandidate, candidate_catalog
 from .channels import CHANNELS
 from .evaluation import (
     accepted_report_data,
@@ -48,6 +48,7 @@ from .locations import Location, LocationGrid, scan_locations
 from .model import NominalModel
 from .record import Record, RecordSettings, calibrate
 from .spectral import dft
+from .standing import standing_verdict
 
 __all__ = ["DiagnosisOptions", "DiagnosisResult", "EffectReport", "diagnose", "variant_sensitivities"]
 
@@ -164,6 +165,8 @@ class EffectReport:
         Locations (channel, band) where its signature lies, with the gap before and after.
     injection : dict
         Catalog effect that reproduces the fitted variant.
+    rejected : str or None
+        Why a selected effect is not named (:mod:`.standing`).
     """
 
     name: str
@@ -188,6 +191,7 @@ class EffectReport:
     d_shift: dict[str, Any] | None = None
     cells: list[dict[str, Any]] = field(default_factory=list)
     injection: dict[str, Any] = field(default_factory=dict)
+    rejected: str | None = None
 
     @property
     def key(self) -> str:
@@ -206,6 +210,7 @@ class EffectReport:
             "magnitude_train": _num(self.magnitude_train), "sigma_train": _num(self.sigma_train),
             "parameters": self.parameters, "aliases": self.aliases, "g_shift": self.g_shift,
             "d_shift": self.d_shift, "cells": self.cells, "injection": self.injection,
+            "rejected": self.rejected, "timing": self.name in TIMING_FAMILIES,
         }
 
 
@@ -555,10 +560,8 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     if not accepted and not significant_before:
         summary = "no significant gap"
     elif unexplained:
-        where = "; ".join(f"{loc.channel} {loc.band_hz[0]:.2g}-{loc.band_hz[1]:.2g} Hz ({loc.kind}, {loc.segment}, "
-                          f"{loc.view})" for loc in remaining[:3])
-        summary = ("unexplained gap" + (f" beyond {', '.join(accepted_names)}" if accepted_names else "")
-                   + f": remaining at {where}")
+        summary = f"unexplained gap at {_where(remaining)}" + (
+            f"; also found: {', '.join(accepted_names)}" if accepted_names else "")
     else:
         summary = "explained by " + ", ".join(accepted_names)
     result.verdict = {"effects": accepted_names, "unexplained": unexplained, "summary": summary,
@@ -589,6 +592,8 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
                   floor[1])
     lap("held_out")
     result.effects = reports
+    _apply_naming_rule(result, reports, remaining)
+    summary = result.verdict["summary"]
 
     # plot data ------------------------------------------------------------------------------------
     freq_all = bins_all * model.sample_rate_hz / full.n
@@ -606,6 +611,32 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     result.timing_s = timing
     say(f"done in {timing['total']:.1f} s: {summary}")
     return result
+
+
+def _where(locations: Sequence[Location] | Sequence[dict[str, Any]]) -> str:
+    parts = []
+    for loc in locations[:3]:
+        item = loc if isinstance(loc, dict) else loc.to_dict()
+        lo, hi = item["band_hz"]
+        parts.append(f"{item['channel']} {lo:.2g}-{hi:.2g} Hz ({item['kind']}"
+                     + (f", {item['segment']}, {item['view']}" if "segment" in item else "") + ")")
+    return "; ".join(parts)
+
+
+def _apply_naming_rule(result: DiagnosisResult, reports: Sequence[EffectReport], remaining: Sequence[Location]
+                       ) -> None:
+    """Name only the effects that stand on their own; say first where an unexplained gap sits."""
+    verdict = result.verdict
+    named, rejected = standing_verdict(reports, bool(verdict["unexplained"]))
+    if not rejected:
+        return
+    names = list(dict.fromkeys(report.name for report in named))
+    cells = [cell for report in reports if report.key in rejected for cell in report.cells]
+    where = _where(remaining) if remaining else _where(cells)
+    summary = f"unexplained gap at {where}"
+    summary += f"; also found: {', '.join(names)}" if names else "; no catalog effect explains it"
+    verdict.update({"effects": names, "unexplained": True, "summary": summary,
+                    "accepted_variants": [report.key for report in named], "rejected": rejected})
 
 
 def _reports(full: Record, candidates: Sequence[Candidate], noise: NoiseCandidate | None,

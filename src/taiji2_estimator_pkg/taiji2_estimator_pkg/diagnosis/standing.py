@@ -1,0 +1,71 @@
+"""The naming rule: an effect is named only if it stands on its own (no confident wrong names).
+
+Forward selection accepts the variant that raises the likelihood most; with a large gap that no
+candidate describes, the best-scoring variants are those that shave a little off that gap, and
+naming them would be a confident wrong name. So an accepted effect is named only if
+
+1. it explains the gap where its signature lies: ``shrink >= SHRINK_MIN`` (its gain against the
+   excess power remaining at its own cells, :mod:`.evaluation`), and
+2. the held-out part confirms it: ``heldout_z >= HELDOUT_Z_MIN`` (its trained magnitude applied,
+   fixed, to the held-out third gains against "no effect" by that many sigma), raised to
+   ``HELDOUT_Z_MIN_UNEXPLAINED`` when a gap stays unexplained (the situation in which partial
+   explanations are selected).
+
+An effect that fails is reported with ``accepted = false`` and the reason; the gap it was
+selected for is then part of the unexplained verdict.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+__all__ = ["HELDOUT_Z_MIN", "HELDOUT_Z_MIN_UNEXPLAINED", "SHRINK_MIN", "standing_verdict"]
+
+SHRINK_MIN = 0.5
+HELDOUT_Z_MIN = 1.0
+HELDOUT_Z_MIN_UNEXPLAINED = 3.0
+
+
+def _reason(report: Any, unexplained: bool) -> str | None:
+    """Why an accepted effect does not stand on its own (None: it does)."""
+    if report.shrink is not None and report.shrink < SHRINK_MIN:
+        return (f"explains only {100 * report.shrink:.0f} % of the gap where its signature lies "
+                f"(at least {100 * SHRINK_MIN:.0f} % needed)")
+    z_min = HELDOUT_Z_MIN_UNEXPLAINED if unexplained else HELDOUT_Z_MIN
+    if report.heldout_z is not None and report.heldout_z < z_min:
+        return f"not confirmed on the held-out data (z = {report.heldout_z:.1f}, at least {z_min:g} needed)"
+    return None
+
+
+def standing_verdict(reports: Sequence[Any], unexplained: bool) -> tuple[list[Any], dict[str, str]]:
+    """Apply the naming rule to the accepted effect reports.
+
+    Parameters
+    ----------
+    reports : sequence of EffectReport
+        All effect reports (accepted ones first).
+    unexplained : bool
+        Whether a gap stays unexplained with every accepted effect modelled.
+
+    Returns
+    -------
+    named : list of EffectReport
+        Accepted effects that stand on their own, in their order.
+    rejected : dict of str to str
+        Variant key -> reason, for the accepted effects that do not (their reports are marked
+        ``accepted = False``).
+    """
+    named = []
+    rejected: dict[str, str] = {}
+    for report in reports:
+        if not report.accepted:
+            continue
+        reason = _reason(report, unexplained)
+        if reason is None:
+            named.append(report)
+        else:
+            report.accepted = False
+            report.rejected = reason
+            rejected[report.key] = reason
+    return named, rejected
