@@ -28,6 +28,7 @@ setup(
             "plot = taiji2_estimator_pkg.cli.plot",
             "campaign = taiji2_estimator_pkg.cli.campaign",
             "design = taiji2_estimator_pkg.cli.design",
+            "simulate = taiji2_estimator_pkg.cli.simulate",
         ],
         "console_scripts": ["scale_factor_estimator = taiji2_estimator_pkg.nodes.scale_factor_estimator:main", "com_offset_estimator = taiji2_estimator_pkg.nodes.com_offset_estimator:main"],
     },

@@ -26,7 +26,7 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -345,10 +345,19 @@ def _shifts(theta_with: np.ndarray, theta_without: np.ndarray, cov: np.ndarray) 
 
 
 class _Aliases:
-    """Correlation of the one-parameter signatures after the nominal model."""
+    """Correlation of the one-parameter signatures after the nominal model.
 
-    def __init__(self, record: Record, candidates: Sequence[Candidate], threshold: float) -> None:
+    Exact-scan (timing) signatures are correlated at first order (a short lag looks like a delay)
+    but told apart by their exact shapes: a pair involving one is an alias only if the exact fits
+    differ by less than the gain floor.
+    """
+
+    def __init__(self, record: Record, candidates: Sequence[Candidate], threshold: float,
+                 floor: float = 0.0) -> None:
         self.threshold = threshold
+        self.record = record
+        self.floor = floor
+        self._exact: dict[str, float] = {}
         self.single = [c for c in candidates if c.n_params == 1]
         self.position = {c.key: i for i, c in enumerate(self.single)}
         if not self.single:
@@ -371,7 +380,25 @@ class _Aliases:
         if i is None:
             return []
         row = self.correlation[i]
-        return [self.single[j].key for j in np.flatnonzero(np.abs(row) >= self.threshold) if j != i]
+        out = []
+        for j in np.flatnonzero(np.abs(row) >= self.threshold):
+            other = self.single[j]
+            if j == i:
+                continue
+            if (candidate.grid is not None or other.grid is not None) and \
+                    abs(self._exact_chi2(other) - self._exact_chi2(candidate)) >= self.floor:
+                continue
+            out.append(other.key)
+        return out
+
+    def _exact_chi2(self, candidate: Candidate) -> float:
+        """chi2 of the nominal model plus the candidate, by its exact scan where it has one."""
+        if candidate.key not in self._exact:
+            if candidate.series is not None:
+                self._exact[candidate.key] = self.record.series_fit(candidate, self.record.nuisance)[1]
+            else:
+                self._exact[candidate.key] = self.record.chi2(self.record.nuisance + candidate.column_names())
+        return self._exact[candidate.key]
 
 
 def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: DiagnosisOptions | None = None,
@@ -396,7 +423,8 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
         determine the nominal calibration; never a guess.
     """
     options = options or DiagnosisOptions()
-    model = nominal if isinstance(nominal, NominalModel) else NominalModel.from_config(nominal)
+    model = _with_stamp_phases(nominal if isinstance(nominal, NominalModel) else NominalModel.from_config(nominal),
+                               inp)
     say = progress or (lambda message: None)
     settings = _settings(options)
     clock = time.perf_counter()
@@ -410,7 +438,8 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
 
     result = DiagnosisResult(status="ok", model=model.summary(), inputs={
         "samples": inp.n, "duration_s": inp.duration_s, "rejected": dict(inp.rejected),
-        "rejected_total": int(sum(inp.rejected.values())), "t0_s": float(inp.t_s[0]) if inp.n else None})
+        "rejected_total": int(sum(inp.rejected.values())), "t0_s": float(inp.t_s[0]) if inp.n else None,
+        "stamp_phase_s": dict(inp.stamp_phase_s)})
     minimum = options.min_duration_s if options.min_duration_s is not None else max(3 * model.maneuver_period_s, 600.0)
     if abs(inp.sample_rate_hz - model.sample_rate_hz) > 1e-9 * model.sample_rate_hz:
         return _insufficient(result, f"sample rate {inp.sample_rate_hz} Hz differs from the model's "
@@ -575,7 +604,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
 
     # 4. how far: reports of the accepted effects and of the best variant of every other family ---
     say("how far: gaps, shrink and calibration shifts")
-    aliases = _Aliases(full, candidates, options.alias_correlation)
+    aliases = _Aliases(full, candidates, options.alias_correlation, floor[1])
     reports = _reports(full, candidates, noise, accepted, noise_fit, current, theta_final, cov_final, chi2_final,
                        log_n, options, model, aliases, floor[1])
     result.how_far = how_far(full, [loc for loc in before if loc.segment == "all"][:8], accepted,
@@ -611,6 +640,21 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     result.timing_s = timing
     say(f"done in {timing['total']:.1f} s: {summary}")
     return result
+
+
+def _with_stamp_phases(model: NominalModel, inp: DiagnosisInput) -> NominalModel:
+    """The model's timing with the stamp phases the grid alignment removed (docs/interfaces.md).
+
+    GRS stamps moved earlier by p_g name an interval ending p_g later than the model's convention
+    says (grs_stamp - p_g), commands moved earlier by p_c act p_c later (latency + p_c): the
+    command-to-GRS delay changes by p_c - p_g, the star-tracker offset against the GRS by + p_g.
+    """
+    phase_grs = inp.stamp_phase_s.get("grs", 0.0)
+    phase_command = inp.stamp_phase_s.get("command", 0.0)
+    if phase_grs == 0.0 and phase_command == 0.0:
+        return model
+    return replace(model, delay_s=model.delay_s + phase_command - phase_grs,
+                   st_offset_s=model.st_offset_s + phase_grs)
 
 
 def _where(locations: Sequence[Location] | Sequence[dict[str, Any]]) -> str:

@@ -49,6 +49,10 @@ class DiagnosisInput:
         fs [Hz].
     rejected : dict of str to int
         Samples dropped, by reason.
+    stamp_phase_s : dict of str to float
+        Constant sub-step phase of the GRS and command stamps against the star-tracker grid [s],
+        removed when the streams were put on the grid (:func:`align_streams`); a timing convention
+        the diagnosis adds to its nominal model.
     """
 
     t_s: np.ndarray
@@ -57,6 +61,7 @@ class DiagnosisInput:
     torque_cmd_n_m: np.ndarray
     sample_rate_hz: float
     rejected: dict[str, int] = field(default_factory=dict)
+    stamp_phase_s: dict[str, float] = field(default_factory=lambda: {"grs": 0.0, "command": 0.0})
 
     @property
     def n(self) -> int:
@@ -103,7 +108,7 @@ def _longest_run(valid: np.ndarray) -> tuple[int, int]:
 
 
 def _finish(t: np.ndarray, q: np.ndarray, v: np.ndarray, tau: np.ndarray, valid: np.ndarray, fs: float,
-            counts: Counter) -> DiagnosisInput:
+            counts: Counter, stamp_phase_s: dict[str, float] | None = None) -> DiagnosisInput:
     start, stop = _longest_run(valid)
     outside = int(np.count_nonzero(valid)) - (stop - start)
     if outside:
@@ -116,7 +121,8 @@ def _finish(t: np.ndarray, q: np.ndarray, v: np.ndarray, tau: np.ndarray, valid:
         sign = np.concatenate(([1.0], np.where(np.cumsum(flips) % 2 == 1, -1.0, 1.0)))
         q *= sign[:, None]
     return DiagnosisInput(t[start:stop].copy(), q, v[start:stop].copy(), tau[start:stop].copy(), fs,
-                          {key: int(value) for key, value in counts.items() if value})
+                          {key: int(value) for key, value in counts.items() if value},
+                          dict(stamp_phase_s or {"grs": 0.0, "command": 0.0}))
 
 
 def prepare_input(t_s: ArrayLike, st_quat_xyzw: ArrayLike, voltages_v: ArrayLike, torque_cmd_n_m: ArrayLike,
@@ -247,8 +253,11 @@ def align_streams(st_t_s: ArrayLike, st_quat_xyzw: ArrayLike, grs1_t_s: ArrayLik
                   command_torque_n_m: ArrayLike, sample_rate_hz: float = 10.0) -> DiagnosisInput:
     """Put separately stamped streams on one grid (what a bag gives).
 
-    The grid is that of the star tracker (t_0 its first valid stamp); a GRS sample belongs to the
-    grid point within a quarter step of its stamp. Grid points lacking any sensor are gaps.
+    The grid is that of the star tracker (t_0 its first valid stamp). The GRS and command streams
+    may be stamped at a constant sub-step phase against it (their own timing convention): each
+    stream's phase (the median of its stamps' offsets from the grid) is removed before a sample is
+    put on the grid point within a quarter step of its stamp, and reported in
+    ``stamp_phase_s`` (the GRS phase as the mean of the two). Grid points lacking any sensor are gaps.
 
     Parameters
     ----------
@@ -297,6 +306,14 @@ def align_streams(st_t_s: ArrayLike, st_quat_xyzw: ArrayLike, grs1_t_s: ArrayLik
     last = max(float(st_t.max()), float(g1_t.max()), float(g2_t.max()))
     n = int(np.floor((last - t0) / dt + _GRID_TOL)) + 1
 
+    def phase(t: np.ndarray) -> float:
+        """Median offset of the stamps from the grid, in steps, in [-0.5, 0.5)."""
+        offset = (t - t0) / dt
+        return float(np.median((offset - np.rint(offset) + 0.5) % 1.0 - 0.5)) if t.size else 0.0
+
+    phase_g1, phase_g2 = phase(g1_t), phase(g2_t)
+    g1_t, g2_t = g1_t - phase_g1 * dt, g2_t - phase_g2 * dt
+
     def place(name: str, t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         position = (t - t0) / dt
         index = np.rint(position).astype(np.int64)
@@ -325,6 +342,10 @@ def align_streams(st_t_s: ArrayLike, st_quat_xyzw: ArrayLike, grs1_t_s: ArrayLik
     valid = st_ok & g1_ok & g2_ok
     counts["unmatched"] += int(np.count_nonzero(present & ~valid))
     grid = t0 + dt * np.arange(n)
-    tau = commands_on_grid(command_t_s, command_torque_n_m, grid, fs)
+    command_t = np.asarray(command_t_s, dtype=np.float64)
+    finite = command_t[np.isfinite(command_t)]
+    phase_c = phase(finite)
+    tau = commands_on_grid(command_t - phase_c * dt, command_torque_n_m, grid, fs)
     voltages = np.stack((v1, v2), axis=1)
-    return _finish(grid, q, voltages, tau, valid, fs, counts)
+    return _finish(grid, q, voltages, tau, valid, fs, counts,
+                   {"grs": 0.5 * (phase_g1 + phase_g2) * dt, "command": phase_c * dt})
