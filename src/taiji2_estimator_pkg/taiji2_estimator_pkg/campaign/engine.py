@@ -76,7 +76,7 @@ def run_campaign(spec: Mapping[str, Any], out_dir: str | os.PathLike[str], *, sc
     _say(progress, f"campaign {spec['name']!r}: {len(cases)} cases, {run.skipped} already done, {len(todo)} to run")
     if not todo:
         return run
-    client, cluster = _connect(scheduler, workers)
+    client, cluster = connect(scheduler, workers)
     try:
         run.workers = len(client.scheduler_info().get("workers", {}))
         _say(progress, f"dask: {run.workers} workers; dashboard: {_dashboard(client)}")
@@ -118,7 +118,15 @@ def run_campaign(spec: Mapping[str, Any], out_dir: str | os.PathLike[str], *, sc
     return run
 
 
-def _connect(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
+def connect(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
+    """(client, cluster): a client of ``scheduler``, or of a new LocalCluster (one single-threaded,
+    one-BLAS-thread worker process per core, or ``workers``) whose cluster the caller closes.
+
+    Raises
+    ------
+    ConnectionError
+        The scheduler cannot be reached.
+    """
     from dask.distributed import Client, LocalCluster
 
     if scheduler:

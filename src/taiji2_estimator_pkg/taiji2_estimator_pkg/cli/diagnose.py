@@ -1,11 +1,13 @@
 """Diagnose the sim-to-real gap of a recorded experiment: where it lies, which effect causes it, how far it shrinks.
 
-Reads a bag that follows the raw-data contract (star tracker, both GRS, maneuver commands; nothing
-else is used), calibrates the nominal model (``--layout`` or ``--config``) on it, compares the data
-with the calibrated model channel by channel, band by band and segment by segment, tests every
-effect of the catalog as an extension of the model, checks each on held-out data, and writes
-report.md, report.json and PNG plots into --out. Also accepts an ``.npz`` file with the arrays
-``t_s``, ``st_quat_xyzw``, ``voltages_v`` (n, 2, 6) and ``torque_cmd_n_m`` (n, 3) on one grid.
+Reads a bag that follows the raw-data contract (docs/interfaces.md: topics, types, stamps and
+timing conventions; star tracker, both GRS, maneuver commands; nothing else is used), calibrates
+the nominal model (``--layout`` or ``--config``) on it, compares the data with the calibrated
+model channel by channel, band by band and segment by segment, tests every effect of the catalog
+(timing and actuation included) as an extension of the model, checks each on held-out data, names
+only the effects that stand on their own, and writes report.md, report.json and PNG plots into
+--out. Also accepts an ``.npz`` file with the arrays ``t_s``, ``st_quat_xyzw``, ``voltages_v``
+(n, 2, 6) and ``torque_cmd_n_m`` (n, 3) on one grid. Method: docs/diagnosis.md.
 
 Exit status: 0 diagnosed, 3 insufficient data, 2 bad input (one-line error).
 """
@@ -27,7 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="recorded experiment: bag directory, .mcap/.db3 file, or .npz arrays")
     parser.add_argument("--layout", default="type1",
                         help="nominal model: built-in layout type1 | type2 (default type1)")
-    parser.add_argument("--config", default="", help="nominal model: simulator config YAML (instead of --layout)")
+    parser.add_argument("--config", default="", help="nominal model: simulator config YAML (instead of --layout); its timing section "
+                             "states the data's timing conventions (docs/interfaces.md)")
     parser.add_argument("--out", default="diagnosis", help="output directory for report.md, report.json, plots "
                                                            "(default ./diagnosis)")
     parser.add_argument("--json", action="store_true", help="print report.json to stdout")

@@ -1,6 +1,6 @@
 """Load the raw topics of an experiment bag into numpy arrays, for offline calibration.
 
-Reads any ROS 2 bag that follows the raw-data contract (``shared/design/interfaces.md``): MCAP or
+Reads any ROS 2 bag that follows the raw-data contract (``docs/interfaces.md``): MCAP or
 sqlite3, written by this project, by ``ros2 bag`` or by any other tool, with or without truth
 topics and provenance. Messages are decoded in bulk (numpy views of the fixed CDR layout; see
 :mod:`taiji2_runtime.bag.bulk_decode`), so a 3-hour two-GRS bag loads in a fraction of a second.
