@@ -29,7 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="recorded experiment: bag directory, .mcap/.db3 file, or .npz arrays")
     parser.add_argument("--layout", default="type1",
                         help="nominal model: built-in layout type1 | type2 (default type1)")
-    parser.add_argument("--config", default="", help="nominal model: simulator config YAML (instead of --layout); its timing section "
+    parser.add_argument("--config", default="",
+                        help="nominal model: simulator config YAML (instead of --layout); its timing section "
                              "states the data's timing conventions (docs/interfaces.md)")
     parser.add_argument("--out", default="diagnosis", help="output directory for report.md, report.json, plots "
                                                            "(default ./diagnosis)")
