@@ -80,7 +80,9 @@ class DiagnosisOptions:
     alpha_candidates : float
         Family-wise level of the candidate gain floor (Bonferroni over the variants).
     max_effects : int
-        Most effects accepted.
+        Most physical effects accepted. Timing effects (a timing convention of the data: each
+        timing family at most once) do not count: a bag with its own stamp convention and latency
+        keeps the full budget for what is physically wrong.
     train_fraction : float
         Part of the run the held-out check fits on (the rest is held out).
     min_duration_s : float or None
@@ -520,10 +522,14 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     current = list(nuisance)
     _, _, chi2_current = full.fit(current)
     steps: list[dict[str, Any]] = []
-    for step in range(options.max_effects):
+    def physical_count() -> int:
+        return sum(not (isinstance(c, Candidate) and c.is_timing) for c in accepted)
+
+    for step in range(options.max_effects + len(TIMING_FAMILIES)):
         evaluations: list[tuple[float, float, Candidate | NoiseCandidate]] = []
+        physical_full = physical_count() >= options.max_effects
         for candidate in candidates:
-            if candidate in accepted:
+            if candidate in accepted or (physical_full and not candidate.is_timing):
                 continue
             if candidate.series is not None:  # polynomial signature: its exact (series) gain
                 _, chi2_new = full.series_fit(candidate, current)
@@ -532,7 +538,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
             gain = chi2_current - chi2_new
             evaluations.append((gain - candidate.n_params * log_n, gain, candidate))
         noise_step = None
-        if noise is not None and noise not in accepted:
+        if noise is not None and noise not in accepted and not physical_full:
             theta_cur, _, _ = full.fit(current)
             noise_step = full.noise_gain(full.residual_fft(current, theta_cur))
             evaluations.append((noise_step[1] - log_n, noise_step[1], noise))
