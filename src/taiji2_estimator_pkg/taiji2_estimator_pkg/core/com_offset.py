@@ -769,14 +769,17 @@ class ComOffsetEstimator:
         k = 0
         count = epochs.count
         zeros = np.zeros(model.m)
+        # run_end[k]: one past the last epoch of the run of full, consecutive epochs that starts at k
+        continues = np.zeros(count, dtype=bool)
+        continues[:-1] = full[:-1] & full[1:] & (np.diff(epochs.index) == 1)
+        breaks = np.flatnonzero(~continues)
+        run_end = breaks[np.searchsorted(breaks, np.arange(count))] + 1
         while k < count:
             if k > 0:
                 for _ in range(int(epochs.index[k] - epochs.index[k - 1] - 1)):
                     self.filter.step(None)
             if full[k]:  # a run of regular epochs (run_regular also takes the transient after an irregular one)
-                stop = k + 1
-                while stop < count and full[stop] and epochs.index[stop] == epochs.index[stop - 1] + 1:
-                    stop += 1
+                stop = int(run_end[k])
                 start = k
                 chunk = 8192
                 while start < stop:

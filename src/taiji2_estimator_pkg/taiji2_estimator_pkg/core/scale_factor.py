@@ -239,6 +239,8 @@ class ScaleFactorModel:
             g1, g2 = self.grs_ids
             self.w_diff = np.linalg.inv(self.q_grs[g1] + self.q_grs[g2])
             self.w_diff = 0.5 * (self.w_diff + self.w_diff.T)
+            # W = L L^T: a weighted sum of squares sum_k D_k^T W D_k becomes one Gram product (L^T D)^T (L^T D)
+            self.w_diff_chol = np.linalg.cholesky(self.w_diff)
             var = instrument.noise.angular_readout_variance()
             correction = np.zeros(6)
             for block, g in enumerate(self.grs_ids):
@@ -248,6 +250,7 @@ class ScaleFactorModel:
             self.cls_correction = np.diag(correction)
         else:
             self.w_diff = None
+            self.w_diff_chol = None
             self.cls_correction = None
 
     def regressor_noise_correction(self, gramian: np.ndarray) -> dict[tuple[int, ...], np.ndarray]:
@@ -641,7 +644,9 @@ class ScaleFactorEstimator:
             both = np.all(grs_present, axis=1)
             if np.any(both):
                 d_rows = model.difference_regressor(epochs.diffs[both])
-                self.diff_moment += np.einsum("kji,jl,klm->im", d_rows, model.w_diff, d_rows)
+                # sum_k D_k^T W D_k = Z^T Z with Z = stacked L^T D_k  (W = L L^T)
+                whitened = (model.w_diff_chol.T @ d_rows).reshape(-1, d_rows.shape[-1])
+                self.diff_moment += whitened.T @ whitened
                 self.n_diff += int(np.count_nonzero(both))
         y_all = epochs.phi @ model.to_model.T
         for kind, start, stop in self._runs(epochs, regular, st_present):
@@ -684,6 +689,11 @@ class ScaleFactorEstimator:
         """
         k = 0
         count = epochs.count
+        # run_end[k]: one past the last epoch of the run of regular, consecutive epochs from k
+        continues = np.zeros(count, dtype=bool)
+        continues[:-1] = regular[:-1] & regular[1:] & (np.diff(epochs.index) == 1)
+        breaks = np.flatnonzero(~continues)
+        run_end = breaks[np.searchsorted(breaks, np.arange(count))] + 1
         while k < count:
             if self.filter.fresh and not st_present[k]:
                 yield ("skip", k, k + 1)
@@ -694,9 +704,7 @@ class ScaleFactorEstimator:
                 if missing > 0:
                     yield ("gap", 0, missing)
             if regular[k]:
-                stop = k + 1
-                while stop < count and regular[stop] and epochs.index[stop] == epochs.index[stop - 1] + 1:
-                    stop += 1
+                stop = int(run_end[k])
                 yield ("regular", k, stop)
                 k = stop
             else:
@@ -760,7 +768,8 @@ class ScaleFactorEstimator:
         if len(self.grs_ids) == 2:
             both = np.all(epochs.grs_ok, axis=1)
             resid = model.difference_regressor(epochs.diffs[both]) @ g_hat
-            nis_pair[both] = np.einsum("ki,ij,kj->k", resid, model.w_diff, resid)
+            # r^T W r = |L^T r|^2
+            nis_pair[both] = np.sum((resid @ model.w_diff_chol) ** 2, axis=1)
         return nis_st, nis_pair, states
 
     # checkpoint ---------------------------------------------------------------------------------
