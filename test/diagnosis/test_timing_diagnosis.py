@@ -14,6 +14,7 @@ import pytest
 
 from taiji2_estimator_pkg.diagnosis import align_streams, diagnose, prepare_input
 from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES
+from taiji2_estimator_pkg.diagnosis.partners import jointly_determined
 from taiji2_estimator_pkg.diagnosis.standing import HELDOUT_Z_MIN_UNEXPLAINED, SHRINK_MIN, standing_verdict
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.effect_catalog import make_effect
@@ -92,3 +93,20 @@ def test_naming_rule():
     assert not weak.accepted and "held-out" in weak.rejected
     named, rejected = standing_verdict([_report("c", 0.9, HELDOUT_Z_MIN_UNEXPLAINED - 0.5)], unexplained=False)
     assert [r.key for r in named] == ["c"] and rejected == {}
+
+
+def test_partners_are_effects_whose_magnitudes_correlate_almost_perfectly():
+    # a latency and a lag splitting one group delay (rho = -0.999), and an unrelated effect (rho = 0.1)
+    sigma = np.array([1.0, 0.02, 0.02, 3.0])
+    rho = np.eye(4)
+    rho[1, 2] = rho[2, 1] = -0.999
+    rho[1, 3] = rho[3, 1] = 0.1
+    cov = rho * np.outer(sigma, sigma)
+    current = ["nuisance", "delay", "lag", "drift"]
+    partners = jointly_determined([["delay"], ["lag"], ["drift"]], ["actuation_delay", "thruster_response", "com"],
+                                  current, cov, 0.95)
+    assert partners == {"actuation_delay": ["thruster_response"], "thruster_response": ["actuation_delay"]}
+    # just under the threshold: no partners
+    rho[1, 2] = rho[2, 1] = -0.94
+    cov = rho * np.outer(sigma, sigma)
+    assert jointly_determined([["delay"], ["lag"]], ["a", "b"], current, cov, 0.95) == {}

@@ -46,6 +46,7 @@ from .evaluation import (
 from .inputs import DiagnosisInput
 from .locations import Location, LocationGrid, scan_locations
 from .model import NominalModel
+from .partners import jointly_determined
 from .record import Record, RecordSettings, calibrate
 from .spectral import dft
 from .standing import standing_verdict
@@ -161,6 +162,9 @@ class EffectReport:
         Every parameter (value, sigma).
     aliases : list of str
         Variants with (nearly) the same signature.
+    partners : list of str
+        Other accepted effects fitted jointly with this one whose magnitudes the data determine
+        only together (:mod:`.partners`): its gain, shrink and held-out check are those of the group.
     g_shift, d_shift : dict or None
         Change of the calibrated G (relative) and d [m] once the effect is modelled, with sigmas.
     cells : list of dict
@@ -189,6 +193,7 @@ class EffectReport:
     sigma_train: float | None = None
     parameters: dict[str, Any] = field(default_factory=dict)
     aliases: list[str] = field(default_factory=list)
+    partners: list[str] = field(default_factory=list)
     g_shift: dict[str, Any] | None = None
     d_shift: dict[str, Any] | None = None
     cells: list[dict[str, Any]] = field(default_factory=list)
@@ -210,7 +215,7 @@ class EffectReport:
             "heldout_delta_chi2": _num(self.heldout_delta_chi2),
             "heldout_delta_chi2_best": _num(self.heldout_delta_chi2_best), "heldout_z": _num(self.heldout_z),
             "magnitude_train": _num(self.magnitude_train), "sigma_train": _num(self.sigma_train),
-            "parameters": self.parameters, "aliases": self.aliases, "g_shift": self.g_shift,
+            "parameters": self.parameters, "aliases": self.aliases, "partners": self.partners, "g_shift": self.g_shift,
             "d_shift": self.d_shift, "cells": self.cells, "injection": self.injection,
             "rejected": self.rejected, "timing": self.name in TIMING_FAMILIES,
         }
@@ -611,8 +616,11 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     # 4. how far: reports of the accepted effects and of the best variant of every other family ---
     say("how far: gaps, shrink and calibration shifts")
     aliases = _Aliases(full, candidates, options.alias_correlation, floor[1])
+    deterministic = [c for c in accepted if isinstance(c, Candidate)]
+    partners = jointly_determined([c.column_names() for c in deterministic], [c.key for c in deterministic],
+                                  current, cov_final, options.alias_correlation)
     reports = _reports(full, candidates, noise, accepted, noise_fit, current, theta_final, cov_final, chi2_final,
-                       log_n, options, model, aliases, floor[1])
+                       log_n, options, model, aliases, floor[1], partners)
     result.how_far = how_far(full, [loc for loc in before if loc.segment == "all"][:8], accepted,
                              {noise.key: noise_fit.get("kappa", 0.0)} if noise is not None else {}, grid,
                              bins_all, template_all)
@@ -692,8 +700,11 @@ def _apply_naming_rule(result: DiagnosisResult, reports: Sequence[EffectReport],
 def _reports(full: Record, candidates: Sequence[Candidate], noise: NoiseCandidate | None,
              accepted: Sequence[Candidate | NoiseCandidate], noise_fit: dict[str, float], current: list[str],
              theta_final: np.ndarray, cov_final: np.ndarray, chi2_final: float, log_n: float,
-             options: DiagnosisOptions, model: NominalModel, aliases: _Aliases, floor: float) -> list[EffectReport]:
-    """Accepted effects (final joint fit, drop-one gain) and the best other variant per family (add-one)."""
+             options: DiagnosisOptions, model: NominalModel, aliases: _Aliases, floor: float,
+             partners: dict[str, list[str]]) -> list[EffectReport]:
+    """Accepted effects (final joint fit, drop-one gain: dropped with their partners) and the best other
+    variant per family (add-one)."""
+    columns_of = {c.key: c.column_names() for c in accepted if isinstance(c, Candidate)}
     edges, period, halfwidth = options.band_edges_hz, model.maneuver_period_s, options.harmonic_halfwidth
     position = {name: i for i, name in enumerate(current)}
     reports: list[EffectReport] = []
@@ -712,7 +723,8 @@ def _reports(full: Record, candidates: Sequence[Candidate], noise: NoiseCandidat
         index = [position[name] for name in names]
         theta, cov = theta_final[index], cov_final[np.ix_(index, index)]
         magnitude, sigma = candidate.magnitude(theta, cov)
-        others = [name for name in current if name not in names]
+        dropped = set(names).union(*(columns_of[key] for key in partners.get(candidate.key, [])))
+        others = [name for name in current if name not in dropped]
         theta_o, _, chi2_o = full.fit(others)
         gain = chi2_o - chi2_final
         g_shift, d_shift = _shifts(theta_final, theta_o, cov_final)
@@ -723,8 +735,8 @@ def _reports(full: Record, candidates: Sequence[Candidate], noise: NoiseCandidat
             gain, candidate.n_params, True, shrink,
             parameters={p: {"value": float(v), "sigma": float(math.sqrt(max(cov[i, i], 0.0)))}
                         for i, (p, v) in enumerate(zip(candidate.params, theta, strict=True))},
-            aliases=aliases.of(candidate), g_shift=g_shift, d_shift=d_shift, cells=cells,
-            injection=candidate.inject(theta, model)))
+            aliases=aliases.of(candidate), partners=partners.get(candidate.key, []), g_shift=g_shift,
+            d_shift=d_shift, cells=cells, injection=candidate.inject(theta, model)))
     accepted_families = {c.name for c in accepted}
     best: dict[str, tuple[float, float, Candidate]] = {}
     for candidate in candidates:
@@ -792,7 +804,8 @@ def _held_out(inp: DiagnosisInput, split: int, model: NominalModel, g: np.ndarra
         candidate = by_key.get(report.key)
         if candidate is None:
             continue
-        others = list(train.nuisance) + [name for c in accepted_det if c.key != candidate.key
+        group = {candidate.key, *report.partners}  # judged with its partners left out (.partners)
+        others = list(train.nuisance) + [name for c in accepted_det if c.key not in group
                                          for name in c.column_names()]
         data = held_out_deterministic(train, test, candidate, others, edges, period, halfwidth, floor)
         for key, value in data.items():

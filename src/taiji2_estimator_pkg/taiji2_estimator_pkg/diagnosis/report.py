@@ -103,6 +103,10 @@ def _markdown(result: DiagnosisResult, files: list[str]) -> str:
                       f"{_fmt(effect.heldout_delta_chi2_best, 3)} possible"]
             if effect.aliases:
                 lines.append(f"- indistinguishable with these data from: {', '.join(effect.aliases)}")
+            if effect.partners:
+                lines.append(f"- determined only jointly with {', '.join(effect.partners)} (their magnitudes "
+                             "correlate almost perfectly: the sum is well determined, the split is not; gain, "
+                             "shrink and held-out check are those of the group)")
             if effect.g_shift:
                 rel = np.array(effect.g_shift["relative"]) * 1e6
                 dm = np.array(effect.d_shift["m"]) * 1e6 if effect.d_shift else np.zeros((2, 3))
