@@ -52,19 +52,17 @@ def main() -> None:
     se = 1 / np.sqrt(2 * (args.seeds - 1))
     print(f"{args.layout}, {args.maneuver_file}, {args.seeds} seeds x {maneuver.duration_s:g} s; "
           f"standard error of a std {se:.3f}")
+    # one row per parameter: (name, errors over seeds, CRLB, display scale, unit), GRS1 then GRS2, G then d
+    table = []
     for i in range(2):
-        for k in range(3):
-            j = 3 * i + k
-            std = g_err[:, j].std(ddof=1)
-            crlb = bound.scale_factor_relative_sigma[j]
-            print(f"  {PARAMETER_NAMES[6 * i + k]:14} err std {100 * std:.4f} %  CRLB {100 * crlb:.4f} %  "
-                  f"std/CRLB {std / crlb:.2f}")
-        for k in range(3):
-            j = 3 * i + k
-            std = d_err[:, j].std(ddof=1)
-            crlb = bound.com_offset_sigma[j]
-            print(f"  {PARAMETER_NAMES[6 * i + 3 + k]:14} err std {1e6 * std:.1f} um  CRLB {1e6 * crlb:.1f} um  "
-                  f"std/CRLB {std / crlb:.2f}")
+        table += [(PARAMETER_NAMES[6 * i + k], g_err[:, 3 * i + k], bound.scale_factor_relative_sigma[3 * i + k],
+                   100.0, "%") for k in range(3)]
+        table += [(PARAMETER_NAMES[6 * i + 3 + k], d_err[:, 3 * i + k], bound.com_offset_sigma[3 * i + k], 1e6, "um")
+                  for k in range(3)]
+    for name, errors, crlb, scale, unit in table:
+        std = errors.std(ddof=1)
+        print(f"  {name:14} err std {scale * std:.4g} {unit}  CRLB {scale * crlb:.4g} {unit}  "
+              f"std/CRLB {std / crlb:.2f}")
     man = np.max([r["maneuver_peak"] for r in rows], axis=0)
     tot = np.max([r["total_peak"] for r in rows], axis=0)
     print(f"  peak maneuver-induced |a| / range (max over seeds): {np.round(man, 3).tolist()}")
