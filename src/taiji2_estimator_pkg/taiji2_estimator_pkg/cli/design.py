@@ -124,7 +124,7 @@ def main(args: argparse.Namespace) -> int:
     if args.minimize_duration:
         target = reference_s * float(np.max(ratios)) ** 2
         for _ in range(4):
-            # whole seconds: the estimator nodes close their epochs on whole seconds of data
+            # whole seconds: how a planner schedules a maneuver (the bound changes by < 1e-4 per s)
             target = float(np.ceil(target))
             if target > _MAX_DURATION_S:
                 return _fail(f"infeasible: duration: every requirement needs {target / 86400:.1f} d "

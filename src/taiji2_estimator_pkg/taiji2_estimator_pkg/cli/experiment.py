@@ -105,8 +105,7 @@ def main(args: argparse.Namespace) -> int:
             print(f"error: taiji2 experiment: {exc}", file=sys.stderr)
             return 2
         if args.duration_s is None:
-            # whole seconds: the estimator nodes close their epochs on whole seconds of data
-            args.duration_s = float(-(-(flown.start_s + flown.duration_s) // 1.0))
+            args.duration_s = float(flown.start_s + flown.duration_s)
         commander_maneuver = ["-p", f"maneuver_file:={Path(args.maneuver).resolve()}"]
     if args.duration_s is None:
         args.duration_s = 10800.0

@@ -45,8 +45,6 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         self.scale_factors_ns = -1
         self.omega = np.full(3, np.nan)
         self.history: list[tuple[float, np.ndarray | None, np.ndarray]] = []  # paper method only
-        self.last_t_ns = -1
-        self.last_publish_ns = -1
         self.last_stamp_ns = -1  # stamp of the last published estimate
         self.last_nis = float("nan")
         resumed = self.resume()

@@ -165,6 +165,8 @@ class EstimatorNode(rclpy.node.Node):
         self.reported_rejections: dict[str, dict[str, int]] = {}
         self.last_data_wall = time.monotonic()
         self.last_checkpoint_ns = -1
+        self.last_t_ns = -1  # stamp of the last epoch processed
+        self.last_publish_ns = -1  # data time of the last published estimate
         self.last_estimate: Any = None
         self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
         steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
@@ -180,12 +182,30 @@ class EstimatorNode(rclpy.node.Node):
     def _release_silent(self) -> None:
         for epoch in self.assembler.expire(time.monotonic()):
             self._process(epoch)
+        self._publish_at_end_of_data()
+
+    def _publish_at_end_of_data(self) -> None:
+        """Data stopped (end of a run, or a pause): publish the estimate of the last epoch, once.
+
+        Estimates go out at the first epoch of each publish period, so without this a run ending
+        inside a period (a 6421.8-s run with 1-s periods) would never publish its last epochs.
+        """
+        if self.last_t_ns <= self.last_publish_ns:
+            return
+        if time.monotonic() - self.last_data_wall < self.p["max_stream_silence_s"]:
+            return
+        self.publish_estimate(self.last_t_ns)
 
     def streams(self) -> Sequence[str]:
         """The raw streams this estimator aligns (may depend on ``self.p``)."""
         raise NotImplementedError
 
     def _process(self, epoch: Any) -> None:
+        """Feed one epoch to the estimator (sets ``last_t_ns``), publishing and checkpointing on schedule."""
+        raise NotImplementedError
+
+    def publish_estimate(self, t_ns: int) -> None:
+        """Publish the estimate of the data up to ``t_ns`` (sets ``last_publish_ns``)."""
         raise NotImplementedError
 
     # -- checkpoints -----------------------------------------------------------------------------

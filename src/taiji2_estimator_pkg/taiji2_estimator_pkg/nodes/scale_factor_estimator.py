@@ -40,7 +40,6 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
         super().__init__("scale_factor_estimator", **node_kwargs)
         self.estimator = make_scale_factor_estimator(self.instrument, self.p)
         self.last_nis = float("nan")
-        self.last_publish_ns = -1
         self.resume()
 
         t = messages.taiji2_msgs
@@ -84,6 +83,7 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
 
     def _process(self, epoch: Any) -> None:
         voltages = {g: epoch.samples[f"grs{g}"] for g in GRS_IDS if f"grs{g}" in epoch.samples}
+        self.last_t_ns = epoch.t_ns
         try:
             report = self.estimator.update(epoch.t_ns / 1e9, epoch.samples.get("star_tracker"), voltages)
         except Exception as exc:  # never crash the graph on one epoch; keep what is estimated
@@ -137,10 +137,10 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
         try:
             for epoch in self.assembler.flush():
                 self._process(epoch)
-            if self.last_publish_ns >= 0 and self.context.ok():
-                self.publish_estimate(self.last_publish_ns)
-            if self.last_publish_ns >= 0:
-                self.save_checkpoint(self.last_publish_ns)
+            if self.last_t_ns >= 0 and self.context.ok():
+                self.publish_estimate(self.last_t_ns)
+            if self.last_t_ns >= 0:
+                self.save_checkpoint(self.last_t_ns)
         finally:
             super().destroy_node()
 
