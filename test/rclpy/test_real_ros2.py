@@ -65,3 +65,27 @@ def test_embedded_runtime_node_reaches_ros2_cli_and_back(ros):
         status, err = _stop(real)
     assert echo.returncode == 0 and "torque" in echo.stdout, echo.stderr
     assert status == 0, err
+
+
+def test_embedded_endpoints_carry_rosidls_type_hash(ros):
+    import json
+
+    from taiji2_runtime.interfaces import type_hash_of
+
+    # our message types: the hash rosidl generates in a colcon build of this workspace
+    for name in ("GrsVoltages", "StarTracker", "ScaleFactorEstimate", "ComOffsetEstimate"):
+        out = ros(f"cat $(ros2 pkg prefix taiji2_msgs)/share/taiji2_msgs/msg/{name}.json")
+        assert out.returncode == 0, out.stderr
+        generated = json.loads(out.stdout)["type_hashes"][0]
+        assert generated["hash_string"] == type_hash_of(f"taiji2_msgs/msg/{name}"), name
+    # an embedded endpoint as the ROS 2 CLI sees it: the hash parsed from USER_DATA, no rmw warning
+    embedded = ros("exec python3 -m taiji2_runtime.cli.main run taiji2_sim_pkg maneuver_commander",
+                   env={"TAIJI2_RUNTIME": "cyclonedds"}, background=True)
+    try:
+        info = ros("ros2 topic echo --once /taiji2/maneuver/command geometry_msgs/msg/WrenchStamped >/dev/null && "
+                   "ros2 topic info -v /taiji2/maneuver/command", timeout=120)
+    finally:
+        _stop(embedded)
+    assert info.returncode == 0, info.stderr
+    assert f"Topic type hash: {type_hash_of('geometry_msgs/msg/WrenchStamped')}" in info.stdout, info.stdout
+    assert "Failed to parse type hash for topic '/taiji2/maneuver/command'" not in info.stderr, info.stderr

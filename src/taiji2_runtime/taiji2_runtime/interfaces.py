@@ -117,6 +117,19 @@ def _repr(self: Any) -> str:
 
 
 @cache
+def type_hash_of(msgtype: str) -> str:
+    """REP 2011 type hash (``RIHS01_<64 hex>``) of a ROS 2 message type, as rosidl computes it."""
+    with _lock:
+        return typestore().hash_rihs01("/".join(split_type(msgtype)))
+
+
+def type_hash(msg_type: type) -> str | None:
+    """Type hash of a message class of this runtime (None for a class that is not a ROS 2 message)."""
+    ros_type = getattr(msg_type, "_ros_type", None)
+    return type_hash_of(ros_type) if ros_type else None
+
+
+@cache
 def message_class(msgtype: str) -> type:
     """The message class of a ROS 2 message type name such as ``taiji2_msgs/msg/StarTracker``.
 

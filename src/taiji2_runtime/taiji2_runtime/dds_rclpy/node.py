@@ -8,7 +8,7 @@ from typing import Any
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
-from taiji2_runtime.interfaces import message_class, ros_type_name
+from taiji2_runtime.interfaces import message_class, ros_type_name, type_hash
 
 from .arguments import node_matches, parse_ros_args
 from .clock import Clock, ROSClock
@@ -163,7 +163,7 @@ class Node(ParameterMixin):
         profile = coerce_qos(qos_profile)
         fqn = self.resolve_topic_name(topic)
         dds_topic = self._context.topic(_dds_topic(fqn), msg_type)
-        writer = DataWriter(self._context.participant(), dds_topic, to_dds_qos(profile))
+        writer = DataWriter(self._context.participant(), dds_topic, to_dds_qos(profile, type_hash(msg_type)))
         publisher = Publisher(writer, msg_type, fqn, profile, context_ok=self._context.ok)
         self._publishers.append(publisher)
         self._context.entities_version += 1
@@ -181,7 +181,7 @@ class Node(ParameterMixin):
         profile = coerce_qos(qos_profile)
         fqn = self.resolve_topic_name(topic)
         dds_topic = self._context.topic(_dds_topic(fqn), msg_type)
-        reader = DataReader(self._context.participant(), dds_topic, to_dds_qos(profile))
+        reader = DataReader(self._context.participant(), dds_topic, to_dds_qos(profile, type_hash(msg_type)))
         subscription = Subscription(reader, msg_type, fqn, callback, profile)
         self._subscriptions.append(subscription)
         self._context.entities_version += 1

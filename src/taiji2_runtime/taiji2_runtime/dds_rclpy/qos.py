@@ -115,8 +115,13 @@ def coerce_qos(qos: QoSProfile | int) -> QoSProfile:
     raise TypeError(f"expected a QoSProfile or a history depth (int), got {qos!r}")
 
 
-def to_dds_qos(profile: QoSProfile) -> Qos:
-    """Cyclone DDS QoS for an rclpy profile: ROS 2 semantics, XCDR1 data representation."""
+def to_dds_qos(profile: QoSProfile, type_hash: str | None = None) -> Qos:
+    """Cyclone DDS QoS for an rclpy profile: ROS 2 semantics, XCDR1 data representation.
+
+    ``type_hash`` (``RIHS01_<hex>``, REP 2011) goes into the endpoint's USER_DATA as
+    ``typehash=<hash>;``, as rmw_cyclonedds_cpp (Jazzy and later) writes it: ROS tools read the
+    type hash of every endpoint from there and warn about endpoints without it.
+    """
     policies = []
     if profile.reliability == ReliabilityPolicy.BEST_EFFORT:
         policies.append(Policy.Reliability.BestEffort)
@@ -132,4 +137,6 @@ def to_dds_qos(profile: QoSProfile) -> Qos:
         policies.append(Policy.Durability.Volatile)
     # ROS 2 data is XCDR1 (rosidl typesupport); without this Cyclone may pick XCDR2.
     policies.append(Policy.DataRepresentation(use_cdrv0_representation=True))
+    if type_hash:
+        policies.append(Policy.Userdata(f"typehash={type_hash};".encode("ascii")))
     return Qos(*policies)
