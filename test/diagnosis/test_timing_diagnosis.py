@@ -15,7 +15,12 @@ import pytest
 from taiji2_estimator_pkg.diagnosis import align_streams, diagnose, prepare_input
 from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES
 from taiji2_estimator_pkg.diagnosis.partners import jointly_determined
-from taiji2_estimator_pkg.diagnosis.standing import HELDOUT_Z_MIN_UNEXPLAINED, SHRINK_MIN, standing_verdict
+from taiji2_estimator_pkg.diagnosis.standing import (
+    FAMILY_VARIANTS_MAX,
+    HELDOUT_Z_MIN_UNEXPLAINED,
+    SHRINK_MIN,
+    standing_verdict,
+)
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.effect_catalog import make_effect
 from taiji2_sim_pkg.core.reference import simulate_reference
@@ -79,8 +84,9 @@ def test_align_streams_removes_a_constant_stamp_phase():
     np.testing.assert_array_equal(inp.voltages_v, out.voltages_v)
 
 
-def _report(key, shrink, heldout_z):
-    return SimpleNamespace(key=key, accepted=True, rejected=None, shrink=shrink, heldout_z=heldout_z)
+def _report(key, shrink, heldout_z, name="", variant=""):
+    return SimpleNamespace(key=key, name=name or key, variant=variant, accepted=True, rejected=None, shrink=shrink,
+                           heldout_z=heldout_z)
 
 
 def test_naming_rule():
@@ -110,3 +116,16 @@ def test_partners_are_effects_whose_magnitudes_correlate_almost_perfectly():
     rho[1, 2] = rho[2, 1] = -0.94
     cov = rho * np.outer(sigma, sigma)
     assert jointly_determined([["delay"], ["lag"]], ["a", "b"], current, cov, 0.95) == {}
+
+
+def test_a_stack_of_variants_of_one_family_is_not_named():
+    # each variant stands on its own, but FAMILY_VARIANTS_MAX + 1 of one family together imitate a gap
+    stack = [_report(f"cc[{v}]", 0.9, 5.0, "cross_coupling", v) for v in ("a", "b", "c", "d")[:FAMILY_VARIANTS_MAX + 1]]
+    delay = _report("actuation_delay", 0.99, 100.0)
+    named, rejected = standing_verdict([delay, *stack], unexplained=False)
+    assert named == [delay] and set(rejected) == {r.key for r in stack}
+    assert all("variants of cross_coupling" in r.rejected for r in stack)
+    # FAMILY_VARIANTS_MAX of them (two independent misalignments, say) are named
+    pair = [_report(f"cc[{v}]", 0.9, 5.0, "cross_coupling", v) for v in ("a", "b")[:FAMILY_VARIANTS_MAX]]
+    named, rejected = standing_verdict(pair, unexplained=False)
+    assert named == pair and rejected == {}

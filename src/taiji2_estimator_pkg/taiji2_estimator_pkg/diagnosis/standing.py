@@ -9,7 +9,12 @@ naming them would be a confident wrong name. So an accepted effect is named only
 2. the held-out part confirms it: ``heldout_z >= HELDOUT_Z_MIN`` (its trained magnitude applied,
    fixed, to the held-out third gains against "no effect" by that many sigma), raised to
    ``HELDOUT_Z_MIN_UNEXPLAINED`` when a gap stays unexplained (the situation in which partial
-   explanations are selected).
+   explanations are selected);
+3. it is not one of ``FAMILY_VARIANTS_MAX + 1`` or more variants of one physical family accepted
+   together: forward selection stacking variants of one family is how a catalog imitates an
+   effect it does not hold (a left-out TM stiffness fitted by four electrode imbalances); one
+   physical effect rarely shows as that many independent variants at once, so such a stack is
+   reported as an unexplained gap, not as a list of names.
 
 An effect that fails is reported with ``accepted = false`` and the reason; the gap it was
 selected for is then part of the unexplained verdict.
@@ -20,11 +25,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-__all__ = ["HELDOUT_Z_MIN", "HELDOUT_Z_MIN_UNEXPLAINED", "SHRINK_MIN", "standing_verdict"]
+__all__ = ["FAMILY_VARIANTS_MAX", "HELDOUT_Z_MIN", "HELDOUT_Z_MIN_UNEXPLAINED", "SHRINK_MIN", "standing_verdict"]
 
 SHRINK_MIN = 0.5
 HELDOUT_Z_MIN = 1.0
 HELDOUT_Z_MIN_UNEXPLAINED = 3.0
+FAMILY_VARIANTS_MAX = 2
 
 
 def _reason(report: Any, unexplained: bool) -> str | None:
@@ -58,10 +64,17 @@ def standing_verdict(reports: Sequence[Any], unexplained: bool) -> tuple[list[An
     """
     named = []
     rejected: dict[str, str] = {}
+    stacked: dict[str, int] = {}
+    for report in reports:
+        if report.accepted and report.variant:  # physical families have variants; timing and noise do not
+            stacked[report.name] = stacked.get(report.name, 0) + 1
     for report in reports:
         if not report.accepted:
             continue
         reason = _reason(report, unexplained)
+        if reason is None and stacked.get(report.name, 0) > FAMILY_VARIANTS_MAX:
+            reason = (f"one of {stacked[report.name]} variants of {report.name} accepted together: they imitate "
+                      f"a gap that no single catalog effect explains")
         if reason is None:
             named.append(report)
         else:
