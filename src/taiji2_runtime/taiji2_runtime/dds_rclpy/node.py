@@ -75,7 +75,6 @@ class Node(ParameterMixin):
         }
         for p in parameter_overrides or []:
             self._parameter_overrides[p.name] = p.value
-        self._context.register_node_name(self.get_fully_qualified_name())
         self._logger = get_logger(self._name if self._namespace == "/" else
                                   f"{self._namespace.strip('/').replace('/', '.')}.{self._name}")
         self._publishers: list[Publisher] = []
@@ -84,6 +83,7 @@ class Node(ParameterMixin):
         self._clock = ROSClock()
         self._clock_subscription: Subscription | None = None
         self.executor: Any = None
+        self._context.register_node(self)
         self._init_parameters(allow_undeclared_parameters)
         self.add_on_set_parameters_callback(self._on_use_sim_time)
         self.declare_parameter("use_sim_time", False)
@@ -166,7 +166,7 @@ class Node(ParameterMixin):
         writer = DataWriter(self._context.participant(), dds_topic, to_dds_qos(profile, type_hash(msg_type)))
         publisher = Publisher(writer, msg_type, fqn, profile, context_ok=self._context.ok)
         self._publishers.append(publisher)
-        self._context.entities_version += 1
+        self._context.entities_changed()
         return publisher
 
     def create_subscription(
@@ -184,7 +184,7 @@ class Node(ParameterMixin):
         reader = DataReader(self._context.participant(), dds_topic, to_dds_qos(profile, type_hash(msg_type)))
         subscription = Subscription(reader, msg_type, fqn, callback, profile)
         self._subscriptions.append(subscription)
-        self._context.entities_version += 1
+        self._context.entities_changed()
         return subscription
 
     def create_timer(
@@ -203,7 +203,7 @@ class Node(ParameterMixin):
         if publisher in self._publishers:
             self._publishers.remove(publisher)
             publisher.destroy()
-            self._context.entities_version += 1
+            self._context.entities_changed()
             return True
         return False
 
@@ -211,7 +211,7 @@ class Node(ParameterMixin):
         if subscription in self._subscriptions:
             self._subscriptions.remove(subscription)
             subscription.destroy()
-            self._context.entities_version += 1
+            self._context.entities_changed()
             return True
         return False
 
@@ -237,7 +237,7 @@ class Node(ParameterMixin):
         for timer in self._timers:
             timer.destroy()
         self._publishers, self._subscriptions, self._timers = [], [], []
-        self._context.unregister_node_name(self.get_fully_qualified_name())
+        self._context.unregister_node(self)
 
     # -- graph ---------------------------------------------------------------------------------
     def get_topic_names_and_types(self, no_demangle: bool = False) -> list[tuple[str, list[str]]]:
