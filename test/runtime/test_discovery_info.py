@@ -29,7 +29,7 @@ def test_discovery_topic_type_hash_is_rosidls():
 
 
 def test_nodes_and_their_endpoint_gids_reach_an_independent_reader(context, executor):
-    node = rclpy.node.Node("announced", namespace="/probe", context=context)
+    node = rclpy.node.Node("announced", namespace="/probe", context=context, start_parameter_services=False)
     executor.add_node(node)
     publisher = node.create_publisher(messages.std_msgs.String, "said", 10)
     node.create_subscription(messages.std_msgs.String, "heard", lambda m: None, 10)
@@ -46,7 +46,7 @@ def test_nodes_and_their_endpoint_gids_reach_an_independent_reader(context, exec
     def announced() -> bool:
         for info in infos.take(N=64):
             for entry in info.node_entities_info_seq:
-                if entry.node_name == "announced" and len(entry.reader_gid_seq) >= 1:
+                if entry.node_name == "announced" and entry.reader_gid_seq and entry.writer_gid_seq:
                     seen["participant"], seen["node"] = bytes(info.gid.data), entry
         for sample in writers.take(N=256):
             if sample.topic_name == "rt/probe/said":

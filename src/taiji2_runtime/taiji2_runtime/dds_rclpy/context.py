@@ -239,7 +239,8 @@ class Context:
                 return
             self._discovery.announce([
                 (node.get_namespace(), node.get_name(),
-                 [s.guid for s in node.subscriptions], [p.guid for p in node.publishers])
+                 [s.guid for s in node.subscriptions] + [s.reader_guid for s in node.services],
+                 [p.guid for p in node.publishers] + [s.writer_guid for s in node.services])
                 for node in self._nodes.values()
             ])
 

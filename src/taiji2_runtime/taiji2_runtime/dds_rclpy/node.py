@@ -83,6 +83,7 @@ class Node(ParameterMixin):
         self._clock = ROSClock()
         self._clock_subscription: Subscription | None = None
         self.executor: Any = None
+        self._services: list[Any] = []
         self._context.register_node(self)
         self._init_parameters(allow_undeclared_parameters)
         self.add_on_set_parameters_callback(self._on_use_sim_time)
@@ -91,6 +92,11 @@ class Node(ParameterMixin):
             for name, value in self._parameter_overrides.items():
                 if not self.has_parameter(name):
                     self.declare_parameter(name, value)
+        if start_parameter_services:
+            from .parameter_services import start_parameter_services as start
+
+            self._services = start(self)
+            self._context.entities_changed()
 
     # -- identity ------------------------------------------------------------------------------
     @property
@@ -119,6 +125,10 @@ class Node(ParameterMixin):
     @property
     def subscriptions(self) -> Iterator[Subscription]:
         yield from self._subscriptions
+
+    @property
+    def services(self) -> Iterator[Any]:
+        yield from self._services
 
     @property
     def timers(self) -> Iterator[Timer]:
@@ -234,9 +244,12 @@ class Node(ParameterMixin):
         for subscription in self._subscriptions:
             if alive:
                 subscription.destroy()
+        for service in self._services:
+            if alive:
+                service.destroy()
         for timer in self._timers:
             timer.destroy()
-        self._publishers, self._subscriptions, self._timers = [], [], []
+        self._publishers, self._subscriptions, self._timers, self._services = [], [], [], []
         self._context.unregister_node(self)
 
     # -- graph ---------------------------------------------------------------------------------
