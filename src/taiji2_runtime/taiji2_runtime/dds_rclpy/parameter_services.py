@@ -18,7 +18,7 @@ from .service import Service
 
 _T = Parameter.Type
 #: ParameterValue field holding each parameter type's value
-_VALUE_FIELD = {
+VALUE_FIELD = {
     _T.BOOL: "bool_value", _T.INTEGER: "integer_value", _T.DOUBLE: "double_value", _T.STRING: "string_value",
     _T.BYTE_ARRAY: "byte_array_value", _T.BOOL_ARRAY: "bool_array_value",
     _T.INTEGER_ARRAY: "integer_array_value", _T.DOUBLE_ARRAY: "double_array_value",
@@ -29,7 +29,7 @@ _VALUE_FIELD = {
 def to_parameter_value(parameter: Parameter) -> Any:
     """rcl_interfaces/msg/ParameterValue of a parameter."""
     msg = message_class("rcl_interfaces/msg/ParameterValue")(type=int(parameter.type_))
-    field = _VALUE_FIELD.get(parameter.type_)
+    field = VALUE_FIELD.get(parameter.type_)
     if field is not None:
         value = parameter.value
         setattr(msg, field, list(value) if isinstance(value, list | tuple | bytes) else value)
@@ -39,7 +39,7 @@ def to_parameter_value(parameter: Parameter) -> Any:
 def from_parameter_msg(msg: Any) -> Parameter:
     """Parameter of an rcl_interfaces/msg/Parameter (NOT_SET when the type is unknown)."""
     kind = _T(msg.value.type) if msg.value.type in _T._value2member_map_ else _T.NOT_SET
-    field = _VALUE_FIELD.get(kind)
+    field = VALUE_FIELD.get(kind)
     value = getattr(msg.value, field) if field else None
     if kind == _T.BYTE_ARRAY:
         value = [bytes([b]) for b in value]
