@@ -29,7 +29,8 @@ def test_discovery_topic_type_hash_is_rosidls():
 
 
 def test_nodes_and_their_endpoint_gids_reach_an_independent_reader(context, executor):
-    node = rclpy.node.Node("announced", namespace="/probe", context=context, start_parameter_services=False)
+    node = rclpy.node.Node("announced", namespace="/probe", context=context, start_parameter_services=False,
+                           enable_rosout=False)
     executor.add_node(node)
     publisher = node.create_publisher(messages.std_msgs.String, "said", 10)
     node.create_subscription(messages.std_msgs.String, "heard", lambda m: None, 10)

@@ -237,12 +237,8 @@ class Context:
             self.entities_version += 1
             if self._discovery is None or not self.ok():
                 return
-            self._discovery.announce([
-                (node.get_namespace(), node.get_name(),
-                 [s.guid for s in node.subscriptions] + [s.reader_guid for s in node.services],
-                 [p.guid for p in node.publishers] + [s.writer_guid for s in node.services])
-                for node in self._nodes.values()
-            ])
+            self._discovery.announce([(node.get_namespace(), node.get_name(), *node.entity_guids())
+                                      for node in self._nodes.values()])
 
     def graph_nodes(self) -> list[Any]:
         """Every node of the domain (``GraphNode``: namespace, name, participant), this context's included."""

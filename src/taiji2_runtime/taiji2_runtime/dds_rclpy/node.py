@@ -84,6 +84,7 @@ class Node(ParameterMixin):
         self._clock_subscription: Subscription | None = None
         self.executor: Any = None
         self._services: list[Any] = []
+        self._rosout: Publisher | None = None
         self._context.register_node(self)
         self._init_parameters(allow_undeclared_parameters)
         self.add_on_set_parameters_callback(self._on_use_sim_time)
@@ -96,7 +97,13 @@ class Node(ParameterMixin):
             from .parameter_services import start_parameter_services as start
 
             self._services = start(self)
-            self._context.entities_changed()
+        if enable_rosout:
+            from . import rosout
+
+            self._rosout = self._make_publisher(message_class("rcl_interfaces/msg/Log"), rosout.ROSOUT_TOPIC,
+                                                rosout.qos_profile_rosout_default)
+            rosout.attach(self._logger.name, self._rosout)
+        self._context.entities_changed()
 
     # -- identity ------------------------------------------------------------------------------
     @property
@@ -170,14 +177,22 @@ class Node(ParameterMixin):
         self, msg_type: type, topic: str, qos_profile: QoSProfile | int, **_ignored: Any
     ) -> Publisher:
         """Create a publisher of ``msg_type`` on ``topic`` (ROS name) with ``qos_profile`` (or a depth)."""
-        profile = coerce_qos(qos_profile)
-        fqn = self.resolve_topic_name(topic)
-        dds_topic = self._context.topic(_dds_topic(fqn), msg_type)
-        writer = DataWriter(self._context.participant(), dds_topic, to_dds_qos(profile, type_hash(msg_type)))
-        publisher = Publisher(writer, msg_type, fqn, profile, context_ok=self._context.ok)
+        publisher = self._make_publisher(msg_type, topic, coerce_qos(qos_profile))
         self._publishers.append(publisher)
         self._context.entities_changed()
         return publisher
+
+    def _make_publisher(self, msg_type: type, topic: str, profile: QoSProfile) -> Publisher:
+        fqn = self.resolve_topic_name(topic)
+        dds_topic = self._context.topic(_dds_topic(fqn), msg_type)
+        writer = DataWriter(self._context.participant(), dds_topic, to_dds_qos(profile, type_hash(msg_type)))
+        return Publisher(writer, msg_type, fqn, profile, context_ok=self._context.ok)
+
+    def entity_guids(self) -> tuple[list[bytes], list[bytes]]:
+        """DDS GUIDs of the node's readers and writers (its entities in ros_discovery_info)."""
+        readers = [s.guid for s in self._subscriptions] + [s.reader_guid for s in self._services]
+        writers = [p.guid for p in self._publishers] + [s.writer_guid for s in self._services]
+        return readers, writers + ([self._rosout.guid] if self._rosout is not None else [])
 
     def create_subscription(
         self,
@@ -247,6 +262,13 @@ class Node(ParameterMixin):
         for service in self._services:
             if alive:
                 service.destroy()
+        if self._rosout is not None:
+            from . import rosout
+
+            rosout.detach(self._logger.name)
+            if alive:
+                self._rosout.destroy()
+            self._rosout = None
         for timer in self._timers:
             timer.destroy()
         self._publishers, self._subscriptions, self._timers, self._services = [], [], [], []
