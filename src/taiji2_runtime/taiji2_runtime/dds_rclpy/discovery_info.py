@@ -40,16 +40,6 @@ START_KEY = "taiji2_start_ns"
 _ALIVE = 16  # DDS_IST_ALIVE
 _GUID_BYTES = 16
 
-#: rosidl's type hash of Jazzy's ParticipantEntitiesInfo (share/rmw_dds_common/msg/*.json); the
-#: Humble layout has none (Humble's rmw does not read type hashes).
-_JAZZY_MSG = {
-    "Gid": "uint8[16] data\n",  # the .msg says char[16]; rosidl's IDL and type description say uint8
-    "NodeEntitiesInfo": "string<=256 node_namespace\nstring<=256 node_name\n"
-                        "Gid[] reader_gid_seq\nGid[] writer_gid_seq\n",
-    "ParticipantEntitiesInfo": "Gid gid\nNodeEntitiesInfo[] node_entities_info_seq\n",
-}
-
-
 def gid_bytes() -> int:
     """Size of ``rmw_dds_common/msg/Gid`` on this distribution (24 on Humble, 16 from Jazzy on)."""
     return 24 if os.environ.get("ROS_DISTRO", "").strip().lower() == "humble" else _GUID_BYTES
@@ -60,12 +50,9 @@ def discovery_type_hash() -> str | None:
     """REP 2011 hash of Jazzy's ParticipantEntitiesInfo (None for the Humble layout)."""
     if gid_bytes() != _GUID_BYTES:
         return None
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    from taiji2_runtime.typestore import rihs01
 
-    store = get_typestore(Stores.EMPTY)
-    for name, text in _JAZZY_MSG.items():
-        store.register(get_types_from_msg(text, f"rmw_dds_common/msg/{name}"))
-    return store.hash_rihs01("rmw_dds_common/msg/ParticipantEntitiesInfo")
+    return rihs01("rmw_dds_common/msg/ParticipantEntitiesInfo")
 
 
 @cache

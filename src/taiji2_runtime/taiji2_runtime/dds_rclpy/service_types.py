@@ -34,16 +34,18 @@ SERVICE_DEFINITIONS = {
 }
 
 
-def _register_bodies(store: Any, kind: str) -> None:
+def _bodies(srv: str, kind: str) -> dict[str, Any]:
+    """rosbags definitions of ``srv``'s request and response bodies, named ``<pkg>/<kind>/<Srv>_<suffix>``."""
     from rosbags.typesys import get_types_from_msg
 
-    for srv, (request, response) in SERVICE_DEFINITIONS.items():
-        pkg, _, name = srv.split("/")
-        for suffix, text in (("Request", request), ("Response", response)):
-            # parsed as a message of the package (so bare field types resolve to <pkg>/msg/...),
-            # then filed under ``kind`` (rosbags cannot parse a ``srv`` name itself)
-            (definition,) = get_types_from_msg(text, f"{pkg}/msg/{name}_{suffix}").values()
-            store.register({f"{pkg}/{kind}/{name}_{suffix}": definition})
+    pkg, _, name = srv.split("/")
+    bodies = {}
+    for suffix, text in zip(("Request", "Response"), SERVICE_DEFINITIONS[srv], strict=True):
+        # parsed as a message of the package (so bare field types resolve to <pkg>/msg/...),
+        # then filed under ``kind`` (rosbags cannot parse a ``srv`` name itself)
+        (definition,) = get_types_from_msg(text, f"{pkg}/msg/{name}_{suffix}").values()
+        bodies[f"{pkg}/{kind}/{name}_{suffix}"] = definition
+    return bodies
 
 
 @cache
@@ -55,19 +57,18 @@ def service_body_class(srv: str, suffix: str) -> type:
     pkg, _, name = srv.split("/")
     with _lock:
         if f"{pkg}/msg/{name}_{suffix}" not in typestore().fielddefs:
-            _register_bodies(typestore(), "msg")
+            typestore().register(_bodies(srv, "msg"))
     return message_class(f"{pkg}/msg/{name}_{suffix}")
 
 
 @cache
 def service_type_hash(srv: str, suffix: str) -> str:
     """REP 2011 hash of ``<pkg>/srv/<Srv>_<suffix>`` (as rosidl generates it for Jazzy)."""
-    from rosbags.typesys import Stores, get_typestore
+    from taiji2_runtime.typestore import register_for_hashing, rihs01
 
-    store = get_typestore(Stores.ROS2_JAZZY)
-    _register_bodies(store, "srv")
     pkg, _, name = srv.split("/")
-    return store.hash_rihs01(f"{pkg}/srv/{name}_{suffix}")
+    register_for_hashing(_bodies(srv, "srv"))
+    return rihs01(f"{pkg}/srv/{name}_{suffix}")
 
 
 @cache
