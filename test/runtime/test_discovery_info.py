@@ -71,3 +71,23 @@ def test_a_destroyed_node_leaves_the_graph(context, executor):
     assert spin_until(executor, lambda: [n.name for n in context.graph_nodes()] == ["short_lived"])
     node.destroy_node()
     assert spin_until(executor, lambda: context.graph_nodes() == [])
+
+
+def test_humble_layout_carries_the_guid_in_a_24_byte_gid(context, executor, monkeypatch):
+    monkeypatch.setenv("ROS_DISTRO", "humble")  # read when the context's participant starts
+    assert discovery_type_hash() is None  # Humble's rmw neither writes nor reads type hashes
+    rclpy.node.Node("old_timer", context=context)
+    observer = DomainParticipant(context.domain_id)
+    qos = Qos(Policy.Reliability.Reliable(0), Policy.Durability.TransientLocal, Policy.History.KeepAll,
+              Policy.DataRepresentation(use_cdrv0_representation=True))
+    infos = DataReader(observer, Topic(observer, DISCOVERY_TOPIC, message_types(24)[2]), qos)
+    gids: list[bytes] = []
+
+    def announced() -> bool:
+        gids.extend(bytes(i.gid.data) for i in infos.take(N=64)
+                    if any(n.node_name == "old_timer" for n in i.node_entities_info_seq))
+        return bool(gids)
+
+    assert spin_until(executor, announced)
+    assert gids[-1] == context.participant().get_guid().bytes + bytes(8)
+    assert [n.name for n in context.graph_nodes()] == ["old_timer"]  # and it reads its own layout back

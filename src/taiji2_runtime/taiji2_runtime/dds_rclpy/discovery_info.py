@@ -45,7 +45,6 @@ def gid_bytes() -> int:
     return 24 if os.environ.get("ROS_DISTRO", "").strip().lower() == "humble" else _GUID_BYTES
 
 
-@cache
 def discovery_type_hash() -> str | None:
     """REP 2011 hash of Jazzy's ParticipantEntitiesInfo (None for the Humble layout)."""
     if gid_bytes() != _GUID_BYTES:
