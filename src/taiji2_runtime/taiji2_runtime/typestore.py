@@ -109,5 +109,16 @@ def register_for_hashing(definitions: dict) -> None:
 
 @cache
 def rihs01(msgtype: str) -> str:
-    """REP 2011 type hash (``RIHS01_<64 hex>``) of a ROS 2 type, as rosidl computes it for Jazzy."""
-    return _hash_typestore().hash_rihs01("/".join(split_type(msgtype)))
+    """REP 2011 type hash (``RIHS01_<64 hex>``) of a ROS 2 type, as rosidl computes it for Jazzy.
+
+    A type only :func:`typestore` knows (registered from a bag's embedded definition) is hashed
+    from that definition.
+
+    Raises
+    ------
+    KeyError
+        If neither store knows the type.
+    """
+    name = "/".join(split_type(msgtype))
+    store = _hash_typestore()
+    return (store if name in store.fielddefs else typestore()).hash_rihs01(name)
