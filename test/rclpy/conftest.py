@@ -27,13 +27,38 @@ if not ENABLED:
 ROS_ENV = os.environ.get("TAIJI2_ROS_ENV", str(REPO.parent / "shared" / "ros2" / "env.sh"))
 
 
+def _domain_without_daemon() -> int:
+    """A domain in 150..199 that no running ros2 daemon serves.
+
+    ros2 commands ask the domain's daemon, which outlives the run that started it; a daemon left by
+    another run on this host (perhaps with another Cyclone configuration) would answer for a graph it
+    cannot see.
+    """
+    taken = set()
+    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+        try:
+            args = cmdline.read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if b"ros2-daemon" in args and b"--ros-domain-id" in args:
+            index = args.index(b"--ros-domain-id") + 1
+            if index < len(args) and args[index].isdigit():
+                taken.add(int(args[index]))
+    start = os.getpid() % 50
+    for step in range(50):
+        domain = 150 + (start + step) % 50
+        if domain not in taken:
+            return domain
+    return 150 + start
+
+
 @pytest.fixture(scope="session")
 def ros(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., subprocess.CompletedProcess]:
     """``ros("ros2 ...", timeout=s)`` runs a bash command line in the sourced ROS 2 + workspace."""
     if not Path(ROS_ENV).is_file():
         pytest.skip(f"no ROS 2 environment script at {ROS_ENV}")
     ws = tmp_path_factory.mktemp("ws")
-    domain = str(150 + os.getpid() % 50)
+    domain = str(_domain_without_daemon())
     packages = ":".join(site.getsitepackages())
     # Debian's python3 first: ROS 2 and rosidl's code generators run on it
     prefix = (f"export PATH=/usr/bin:$PATH ROS_DOMAIN_ID={domain} && source {ROS_ENV} >/dev/null && "

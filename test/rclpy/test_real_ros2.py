@@ -89,3 +89,83 @@ def test_embedded_endpoints_carry_rosidls_type_hash(ros):
     assert info.returncode == 0, info.stderr
     assert f"Topic type hash: {type_hash_of('geometry_msgs/msg/WrenchStamped')}" in info.stdout, info.stdout
     assert "Failed to parse type hash for topic '/taiji2/maneuver/command'" not in info.stderr, info.stderr
+
+
+def _rmw_warnings(text: str) -> list[str]:
+    """Lines in which rmw or rcl complain (a mixed graph must produce none, in either direction)."""
+    return [line for line in text.splitlines() if "WARN" in line or "Failed to parse" in line]
+
+
+def test_ros2_cli_sees_embedded_node_its_parameters_and_topics(ros):
+    embedded = ros("exec python3 -m taiji2_runtime.cli.main run taiji2_sim_pkg maneuver_commander "
+                   "--ros-args -p period_s:=250.0", env={"TAIJI2_RUNTIME": "cyclonedds"}, background=True)
+    try:
+        # discovery is asynchronous: ask until the node is listed (bounded: 30 tries of a 1-s listing)
+        listed = ros("for i in $(seq 30); do ros2 node list --no-daemon | grep -qx /maneuver_commander && break; done;"
+                     " ros2 node list --no-daemon", timeout=180)
+        info = ros("ros2 node info --no-daemon /maneuver_commander && "
+                   "ros2 topic info -v --no-daemon /taiji2/maneuver/command && "
+                   "ros2 param get --no-daemon /maneuver_commander period_s && "
+                   "ros2 param set --no-daemon /maneuver_commander period_s 100.0 && "
+                   "ros2 param get --no-daemon /maneuver_commander period_s && "
+                   "ros2 param dump --no-daemon /maneuver_commander", timeout=180)
+    finally:
+        status, err = _stop(embedded)
+    assert "/maneuver_commander" in listed.stdout.splitlines(), listed.stderr
+    assert info.returncode == 0, info.stderr
+    out = info.stdout
+    assert "/taiji2/maneuver/command: geometry_msgs/msg/WrenchStamped" in out  # node info: its publisher
+    assert "/maneuver_commander/get_parameters: rcl_interfaces/srv/GetParameters" in out
+    assert "Node name: maneuver_commander" in out  # topic info -v: the endpoint belongs to the node
+    assert "Double value is: 250.0" in out and "Set parameter successful" in out and "Double value is: 100.0" in out
+    assert "period_s: 100.0" in out  # dump
+    assert _rmw_warnings(listed.stderr + info.stderr) == []
+    assert status == 0, err
+
+
+def test_embedded_tools_see_rclpy_node_and_its_parameters(ros):
+    real = ros("exec ros2 run taiji2_sim_pkg maneuver_commander --ros-args -p period_s:=250.0", background=True)
+    taiji2 = "python3 -m taiji2_runtime.cli.main"
+    try:
+        listed = ros(f"for i in $(seq 30); do {taiji2} node list | grep -qx /maneuver_commander && break; done; "
+                     f"{taiji2} node list", env={"TAIJI2_RUNTIME": "cyclonedds"}, timeout=180)
+        params = ros(f"{taiji2} param get /maneuver_commander period_s && "
+                     f"{taiji2} param set /maneuver_commander period_s 100.0 && "
+                     f"{taiji2} param get /maneuver_commander period_s", env={"TAIJI2_RUNTIME": "cyclonedds"},
+                     timeout=120)
+    finally:
+        status, err = _stop(real)
+    assert "/maneuver_commander" in listed.stdout.splitlines(), listed.stderr
+    assert params.returncode == 0, params.stderr
+    assert params.stdout.splitlines() == ["Double value is: 250.0", "Set parameter successful",
+                                          "Double value is: 100.0"]
+    assert status == 0, err
+    assert _rmw_warnings(err) == [], err  # the rclpy node had nothing to say about our endpoints
+
+
+def test_type_hashes_equal_rosidls_for_every_installed_message_and_parameter_service(ros):
+    import glob
+    import json
+
+    from taiji2_runtime.dds_rclpy.service_types import SERVICE_DEFINITIONS, service_type_hash
+    from taiji2_runtime.typestore import rihs01
+
+    prefix = ros("echo $AMENT_PREFIX_PATH").stdout.strip().split(":")
+    generated: dict[str, str] = {}
+    for root in prefix:
+        for path in glob.glob(f"{root}/share/*/msg/*.json") + glob.glob(f"{root}/share/rcl_interfaces/srv/*.json"):
+            with open(path, encoding="utf-8") as f:
+                for entry in json.load(f)["type_hashes"]:
+                    generated.setdefault(entry["type_name"], entry["hash_string"])
+    ours: dict[str, str] = {}
+    for name in generated:
+        if name.split("/")[1] == "msg":
+            try:
+                ours[name] = rihs01(name)
+            except KeyError:
+                continue  # a type rosbags does not know (nothing of ours sends it)
+    for srv in SERVICE_DEFINITIONS:
+        for suffix in ("Request", "Response"):
+            ours[f"{srv}_{suffix}"] = service_type_hash(srv, suffix)
+    assert len(ours) > 100
+    assert {n: h for n, h in ours.items() if generated[n] != h} == {}

@@ -119,8 +119,10 @@ def _repr(self: Any) -> str:
 @cache
 def type_hash_of(msgtype: str) -> str:
     """REP 2011 type hash (``RIHS01_<64 hex>``) of a ROS 2 message type, as rosidl computes it."""
+    from taiji2_runtime.typestore import rihs01
+
     with _lock:
-        return typestore().hash_rihs01("/".join(split_type(msgtype)))
+        return rihs01(msgtype)
 
 
 def type_hash(msg_type: type) -> str | None:

@@ -14,7 +14,7 @@ from pathlib import Path
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-__all__ = ["WORKSPACE_INTERFACE_PACKAGES", "split_type", "typestore", "workspace_msg_definitions"]
+__all__ = ["WORKSPACE_INTERFACE_PACKAGES", "rihs01", "split_type", "typestore", "workspace_msg_definitions"]
 
 #: interface packages of this workspace (their .msg files are the single source of truth)
 WORKSPACE_INTERFACE_PACKAGES = ("taiji2_msgs",)
@@ -72,3 +72,53 @@ def typestore() -> Typestore:
         for msgtype, text in workspace_msg_definitions(package).items():
             store.register(get_types_from_msg(text, msgtype))
     return store
+
+
+def _char_as_uint8(desc: tuple) -> tuple:
+    """A rosbags field description with ``char`` read as rosidl reads it: ``uint8``."""
+    kind, args = desc
+    if kind == 1 and args[0] == "char":  # Nodetype.BASE
+        return kind, ("uint8", args[1])
+    if kind in (3, 4):  # Nodetype.ARRAY, Nodetype.SEQUENCE
+        return kind, (_char_as_uint8(args[0]), args[1])
+    return desc
+
+
+@cache
+def _hash_typestore() -> Typestore:
+    """Type descriptions as rosidl hashes them: Jazzy's definitions (type hashes exist from Jazzy
+    on; Humble's differ for a few types) with ``char`` as ``uint8`` (rosidl maps the .msg ``char``
+    to IDL ``uint8`` before hashing), plus this workspace's messages."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    for package in WORKSPACE_INTERFACE_PACKAGES:
+        for msgtype, text in workspace_msg_definitions(package).items():
+            store.register(get_types_from_msg(text, msgtype))
+    for name, (consts, fields) in list(store.fielddefs.items()):
+        store.fielddefs[name] = (consts, [(field, _char_as_uint8(desc)) for field, desc in fields])
+    return store
+
+
+def register_for_hashing(definitions: dict) -> None:
+    """Add rosbags type definitions (e.g. service request/response bodies) to the hashing store."""
+    store = _hash_typestore()
+    store.register(definitions)
+    for name in definitions:
+        consts, fields = store.fielddefs[name]
+        store.fielddefs[name] = (consts, [(field, _char_as_uint8(desc)) for field, desc in fields])
+
+
+@cache
+def rihs01(msgtype: str) -> str:
+    """REP 2011 type hash (``RIHS01_<64 hex>``) of a ROS 2 type, as rosidl computes it for Jazzy.
+
+    A type only :func:`typestore` knows (registered from a bag's embedded definition) is hashed
+    from that definition.
+
+    Raises
+    ------
+    KeyError
+        If neither store knows the type.
+    """
+    name = "/".join(split_type(msgtype))
+    store = _hash_typestore()
+    return (store if name in store.fielddefs else typestore()).hash_rihs01(name)

@@ -37,6 +37,16 @@ from rosbags.typesys.store import Typestore
 
 from .errors import BagError
 
+
+def _type_hash(store: Typestore, msgtype: str) -> str:
+    """rosidl's hash where the workspace knows the type (Jazzy definitions, char as uint8), else the store's."""
+    from taiji2_runtime.typestore import rihs01
+
+    try:
+        return rihs01(msgtype)
+    except KeyError:
+        return store.hash_rihs01(msgtype)
+
 STORAGES = {"mcap": (StoragePlugin.MCAP, ".mcap"), "sqlite3": (StoragePlugin.SQLITE3, ".db3")}
 _VERSION = 8
 _INCOMING = ".incoming"
@@ -179,7 +189,7 @@ class BagWriter:
         if msgtype not in self._store.fielddefs:
             raise KeyError(f"message type {msgtype!r} is unknown to the type store")
         msgdef, _ = self._store.generate_msgdef(msgtype, ros_version=2)
-        entry = _Topic(len(self._topics), topic, msgtype, msgdef, self._store.hash_rihs01(msgtype),
+        entry = _Topic(len(self._topics), topic, msgtype, msgdef, _type_hash(self._store, msgtype),
                        list(offered_qos or []))
         self._topics.append(entry)
         self._by_name[key] = entry.handle

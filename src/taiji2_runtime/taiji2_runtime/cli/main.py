@@ -26,6 +26,8 @@ BUILTIN_VERBS = {
     "run": "taiji2_runtime.cli.run",
     "topic": "taiji2_runtime.cli.topic",
     "bag": "taiji2_runtime.cli.bag",
+    "node": "taiji2_runtime.cli.node",
+    "param": "taiji2_runtime.cli.param",
 }
 
 _PROG = "taiji2"

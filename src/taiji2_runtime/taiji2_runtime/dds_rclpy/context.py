@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
-from cyclonedds.core import DDSException
+from cyclonedds.core import DDSException, Policy, Qos
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.topic import Topic
 
@@ -92,11 +92,12 @@ def _dds_failure_message(captured: str, error: Exception) -> str:
     return f"cannot start DDS on domain {ros_domain_id()} with {source}: {reason}"
 
 
-def _domain_participant(domain_id: int) -> DomainParticipant:
+def _domain_participant(domain_id: int, user_data: bytes) -> DomainParticipant:
     with _domains_lock:
         if domain_id not in _domains and not os.environ.get("CYCLONEDDS_URI"):
             _domains[domain_id], _ = _capture_stderr(lambda: Domain(domain_id, DEFAULT_CYCLONEDDS_CONFIG))
-    participant, _ = _capture_stderr(lambda: DomainParticipant(domain_id))
+    qos = Qos(Policy.Userdata(user_data))
+    participant, _ = _capture_stderr(lambda: DomainParticipant(domain_id, qos=qos))
     return participant
 
 
@@ -111,11 +112,12 @@ class Context:
         self._participant: DomainParticipant | None = None
         self._topics: dict[str, tuple[Topic, type]] = {}
         self._executors: list[Any] = []
-        self._node_names: set[str] = set()
+        self._nodes: dict[str, Any] = {}  # fully qualified name -> Node of this context
         self._on_shutdown: list[Callable[[], None]] = []
         self._graph_readers: tuple[BuiltinDataReader, BuiltinDataReader] | None = None
         self._graph: dict[str, dict[Any, Any]] = {"pub": {}, "sub": {}}
-        self._names: Any = None  # NodeNameRegistry, created with the participant
+        self._discovery: Any = None  # DiscoveryInfo (ros_discovery_info), created with the participant
+        self._start_ns = 0
         self.domain_id = 0
         self.entities_version = 0
 
@@ -165,7 +167,7 @@ class Context:
             participant, self._participant = self._participant, None
             self._topics.clear()
             self._graph_readers = None
-            self._names = None
+            self._discovery = None
         if participant is not None:
             # Deleting the participant (and with it every reader/writer) sends the SPDP dispose,
             # so peers drop us at once instead of after the lease duration.
@@ -190,7 +192,11 @@ class Context:
             if not self.ok():
                 raise NotInitializedException()
             if self._participant is None:
-                self._participant = _domain_participant(self.domain_id)
+                from .discovery_info import DiscoveryInfo, participant_user_data, process_start_ns
+
+                self._start_ns = process_start_ns()
+                self._participant = _domain_participant(self.domain_id, participant_user_data(self._start_ns))
+                self._discovery = DiscoveryInfo(self._participant, self._start_ns)
             return self._participant
 
     def topic(self, dds_name: str, dds_type: type) -> Topic:
@@ -208,31 +214,43 @@ class Context:
             self._topics[dds_name] = (topic, dds_type)
             return topic
 
-    def register_node_name(self, fqn: str) -> None:
-        """Claim a node name: refused at once within the process, announced to the graph."""
+    def register_node(self, node: Any) -> None:
+        """Claim a node's name: refused at once within the process, announced on ros_discovery_info."""
         from .exceptions import NodeNameNonUniqueError
-        from .node_names import NodeNameRegistry
 
+        fqn = node.get_fully_qualified_name()
         with self._lock:
-            if fqn in self._node_names:
+            if fqn in self._nodes:
                 raise NodeNameNonUniqueError(f"a node named {fqn!r} already exists in this process")
-            if self._names is None:
-                self._names = NodeNameRegistry(self.participant())
-            self._names.announce(fqn)
-            self._node_names.add(fqn)
-            self.entities_version += 1
+            self.participant()
+            self._nodes[fqn] = node
+        self.entities_changed()
 
-    def unregister_node_name(self, fqn: str) -> None:
+    def unregister_node(self, node: Any) -> None:
         with self._lock:
-            self._node_names.discard(fqn)
-            if self._names is not None and self.ok():
-                self._names.withdraw(fqn)
+            self._nodes.pop(node.get_fully_qualified_name(), None)
+        self.entities_changed()
+
+    def entities_changed(self) -> None:
+        """A node, reader or writer came or went: wake waitsets and tell the graph (ros_discovery_info)."""
+        with self._lock:
             self.entities_version += 1
+            if self._discovery is None or not self.ok():
+                return
+            self._discovery.announce([(node.get_namespace(), node.get_name(), *node.entity_guids())
+                                      for node in self._nodes.values()])
+
+    def graph_nodes(self) -> list[Any]:
+        """Every node of the domain (``GraphNode``: namespace, name, participant), this context's included."""
+        with self._lock:
+            self.participant()
+            return self._discovery.nodes()
 
     def check_node_names(self) -> None:
-        """Shut down if one of this context's nodes duplicates an earlier node elsewhere in the graph."""
+        """Shut down if one of this context's nodes duplicates an earlier embedded node elsewhere."""
         with self._lock:
-            conflict = self._names.conflict() if self._names is not None and self.ok() else None
+            ok = self._discovery is not None and self.ok()
+            conflict = self._discovery.conflict(set(self._nodes)) if ok else None
         if conflict is not None:
             self.shutdown(f"{DUPLICATE_NODE_NAME}: {conflict}")
 

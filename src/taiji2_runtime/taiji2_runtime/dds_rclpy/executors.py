@@ -157,6 +157,8 @@ class Executor:
             for node in self._nodes:
                 for subscription in node.subscriptions:
                     waitset.attach(subscription.read_condition)
+                for service in node.services:
+                    waitset.attach(service.read_condition)
             self._waitset, self._waitset_version = waitset, version
         return self._waitset
 
@@ -173,6 +175,9 @@ class Executor:
             for subscription in list(node.subscriptions):
                 for msg in subscription.take(_TAKE_BATCH):
                     self._pending.append((subscription.callback, (msg,)))
+            for service in list(node.services):
+                for request in service.take(_TAKE_BATCH):
+                    self._pending.append((service.answer, (request,)))
             for timer in list(node.timers):
                 if timer.is_ready():
                     timer._mark_called()

@@ -53,8 +53,8 @@ class RcutilsLogger:
         if not self.is_enabled_for(severity):
             return False
         ns = time.time_ns()
+        caller = sys._getframe(2)
         if throttle_duration_sec or once:
-            caller = sys._getframe(2)
             site = (caller.f_code.co_filename, caller.f_lineno)
             last = _last_logged.get(site)
             if last is not None and (once or ns - last < throttle_duration_sec * 1e9):
@@ -65,6 +65,10 @@ class RcutilsLogger:
             file=sys.stderr,
             flush=True,
         )
+        from .rosout import forward
+
+        forward(int(severity), self.name, str(message), ns, caller.f_code.co_filename, caller.f_code.co_name,
+                caller.f_lineno)
         return True
 
     def debug(self, message: Any, **kwargs: Any) -> bool:

@@ -75,7 +75,6 @@ class Node(ParameterMixin):
         }
         for p in parameter_overrides or []:
             self._parameter_overrides[p.name] = p.value
-        self._context.register_node_name(self.get_fully_qualified_name())
         self._logger = get_logger(self._name if self._namespace == "/" else
                                   f"{self._namespace.strip('/').replace('/', '.')}.{self._name}")
         self._publishers: list[Publisher] = []
@@ -84,6 +83,9 @@ class Node(ParameterMixin):
         self._clock = ROSClock()
         self._clock_subscription: Subscription | None = None
         self.executor: Any = None
+        self._services: list[Any] = []
+        self._rosout: Publisher | None = None
+        self._context.register_node(self)
         self._init_parameters(allow_undeclared_parameters)
         self.add_on_set_parameters_callback(self._on_use_sim_time)
         self.declare_parameter("use_sim_time", False)
@@ -91,6 +93,17 @@ class Node(ParameterMixin):
             for name, value in self._parameter_overrides.items():
                 if not self.has_parameter(name):
                     self.declare_parameter(name, value)
+        if start_parameter_services:
+            from .parameter_services import start_parameter_services as start
+
+            self._services = start(self)
+        if enable_rosout:
+            from . import rosout
+
+            self._rosout = self._make_publisher(message_class("rcl_interfaces/msg/Log"), rosout.ROSOUT_TOPIC,
+                                                rosout.qos_profile_rosout_default)
+            rosout.attach(self._logger.name, self._rosout)
+        self._context.entities_changed()
 
     # -- identity ------------------------------------------------------------------------------
     @property
@@ -119,6 +132,10 @@ class Node(ParameterMixin):
     @property
     def subscriptions(self) -> Iterator[Subscription]:
         yield from self._subscriptions
+
+    @property
+    def services(self) -> Iterator[Any]:
+        yield from self._services
 
     @property
     def timers(self) -> Iterator[Timer]:
@@ -160,14 +177,22 @@ class Node(ParameterMixin):
         self, msg_type: type, topic: str, qos_profile: QoSProfile | int, **_ignored: Any
     ) -> Publisher:
         """Create a publisher of ``msg_type`` on ``topic`` (ROS name) with ``qos_profile`` (or a depth)."""
-        profile = coerce_qos(qos_profile)
+        publisher = self._make_publisher(msg_type, topic, coerce_qos(qos_profile))
+        self._publishers.append(publisher)
+        self._context.entities_changed()
+        return publisher
+
+    def _make_publisher(self, msg_type: type, topic: str, profile: QoSProfile) -> Publisher:
         fqn = self.resolve_topic_name(topic)
         dds_topic = self._context.topic(_dds_topic(fqn), msg_type)
         writer = DataWriter(self._context.participant(), dds_topic, to_dds_qos(profile, type_hash(msg_type)))
-        publisher = Publisher(writer, msg_type, fqn, profile, context_ok=self._context.ok)
-        self._publishers.append(publisher)
-        self._context.entities_version += 1
-        return publisher
+        return Publisher(writer, msg_type, fqn, profile, context_ok=self._context.ok)
+
+    def entity_guids(self) -> tuple[list[bytes], list[bytes]]:
+        """DDS GUIDs of the node's readers and writers (its entities in ros_discovery_info)."""
+        readers = [s.guid for s in self._subscriptions] + [s.reader_guid for s in self._services]
+        writers = [p.guid for p in self._publishers] + [s.writer_guid for s in self._services]
+        return readers, writers + ([self._rosout.guid] if self._rosout is not None else [])
 
     def create_subscription(
         self,
@@ -184,7 +209,7 @@ class Node(ParameterMixin):
         reader = DataReader(self._context.participant(), dds_topic, to_dds_qos(profile, type_hash(msg_type)))
         subscription = Subscription(reader, msg_type, fqn, callback, profile)
         self._subscriptions.append(subscription)
-        self._context.entities_version += 1
+        self._context.entities_changed()
         return subscription
 
     def create_timer(
@@ -203,7 +228,7 @@ class Node(ParameterMixin):
         if publisher in self._publishers:
             self._publishers.remove(publisher)
             publisher.destroy()
-            self._context.entities_version += 1
+            self._context.entities_changed()
             return True
         return False
 
@@ -211,7 +236,7 @@ class Node(ParameterMixin):
         if subscription in self._subscriptions:
             self._subscriptions.remove(subscription)
             subscription.destroy()
-            self._context.entities_version += 1
+            self._context.entities_changed()
             return True
         return False
 
@@ -234,10 +259,20 @@ class Node(ParameterMixin):
         for subscription in self._subscriptions:
             if alive:
                 subscription.destroy()
+        for service in self._services:
+            if alive:
+                service.destroy()
+        if self._rosout is not None:
+            from . import rosout
+
+            rosout.detach(self._logger.name)
+            if alive:
+                self._rosout.destroy()
+            self._rosout = None
         for timer in self._timers:
             timer.destroy()
-        self._publishers, self._subscriptions, self._timers = [], [], []
-        self._context.unregister_node_name(self.get_fully_qualified_name())
+        self._publishers, self._subscriptions, self._timers, self._services = [], [], [], []
+        self._context.unregister_node(self)
 
     # -- graph ---------------------------------------------------------------------------------
     def get_topic_names_and_types(self, no_demangle: bool = False) -> list[tuple[str, list[str]]]:

@@ -30,6 +30,8 @@ class Publisher:
     def __init__(self, writer: DataWriter, msg_type: type, topic_name: str, qos_profile: QoSProfile,
                  context_ok: Callable[[], bool] = lambda: True) -> None:
         self._writer: DataWriter | None = writer
+        #: the writer's DDS GUID (16 bytes): its GID in ros_discovery_info
+        self.guid: bytes = writer.get_guid().bytes
         self.msg_type = msg_type
         self._topic_name = topic_name
         self.qos_profile = qos_profile

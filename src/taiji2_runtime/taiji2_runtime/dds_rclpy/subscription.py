@@ -23,6 +23,8 @@ class Subscription:
         qos_profile: QoSProfile,
     ) -> None:
         self._reader: DataReader | None = reader
+        #: the reader's DDS GUID (16 bytes): its GID in ros_discovery_info
+        self.guid: bytes = reader.get_guid().bytes
         self.msg_type = msg_type
         self._topic_name = topic_name
         self.callback = callback

@@ -1,0 +1,47 @@
+"""``taiji2 node list`` and ``taiji2 param list|get|set`` against a running embedded node (no ROS 2)."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import time
+
+from support import PYTHON, python_subprocess_env
+
+NODE = "/graph_cli_probe"
+
+
+def _taiji2(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", *args], env=python_subprocess_env(),
+                          capture_output=True, text=True, timeout=60)
+
+
+def test_node_list_and_param_get_set_reach_an_embedded_node():
+    node = subprocess.Popen([PYTHON, "-m", "taiji2_runtime.cli.main", "run", "taiji2_sim_pkg", "maneuver_commander",
+                             "--ros-args", "-r", f"__node:={NODE[1:]}", "-p", "publish_rate_hz:=20.0"],
+                            env=python_subprocess_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        listed = _taiji2("node", "list")
+        while NODE not in listed.stdout.splitlines() and time.monotonic() < deadline:
+            listed = _taiji2("node", "list")  # each call listens for discovery itself
+        assert NODE in listed.stdout.splitlines(), (listed.stdout, listed.stderr)
+
+        names = _taiji2("param", "list", NODE)
+        assert {"  publish_rate_hz", "  period_s", "  use_sim_time"} <= set(names.stdout.splitlines()), names.stderr
+        got = _taiji2("param", "get", NODE, "publish_rate_hz")
+        assert got.stdout.strip() == "Double value is: 20.0", got.stderr
+
+        assert _taiji2("param", "set", NODE, "period_s", "100.0").stdout.strip() == "Set parameter successful"
+        assert _taiji2("param", "get", NODE, "period_s").stdout.strip() == "Double value is: 100.0"
+        refused = _taiji2("param", "set", NODE, "period_s", "fast")
+        errors = [line for line in refused.stderr.splitlines() if line.startswith("error:")]
+        assert refused.returncode == 1 and len(errors) == 1 and "period_s" in errors[0], refused.stderr
+        assert _taiji2("param", "get", NODE, "period_s").stdout.strip() == "Double value is: 100.0"
+
+        absent = _taiji2("param", "get", "/no_such_node", "x", "--timeout", "0.5")
+        assert absent.returncode == 2 and "/no_such_node" in absent.stderr
+        assert node.poll() is None  # the node kept running through all of it
+    finally:
+        node.send_signal(signal.SIGTERM)
+        node.wait(timeout=10)
