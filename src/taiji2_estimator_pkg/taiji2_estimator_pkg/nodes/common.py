@@ -24,6 +24,8 @@ GRS_FRAMES = {1: "tmrf1", 2: "tmrf2"}
 RATE_TOPIC = "/taiji2/estimates/angular_rate"
 METHODS = ("gls", "paper")
 _NS = 1_000_000_000
+#: a health tick (1 s period) this much later than due is reported as a pause of the process [s]
+PAUSE_REPORTED_AFTER_S = 2.0
 
 
 def descriptor(description: str, *, low: float | None = None, high: float | None = None) -> Any:
@@ -168,6 +170,10 @@ class EstimatorNode(rclpy.node.Node):
         self.last_t_ns = -1  # stamp of the last epoch processed
         self.last_publish_ns = -1  # data time of the last published estimate
         self.last_estimate: Any = None
+        self.resumed_from_ns: int | None = None  # data time of the checkpoint this process resumed from
+        self.data_gap_s: float | None = None  # first sample after the resume - checkpoint time [s]
+        self.resume_reported = False
+        self.last_health_wall = time.monotonic()
         self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
         steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
         self.create_timer(1.0, self.publish_health, clock=steady)
@@ -176,6 +182,8 @@ class EstimatorNode(rclpy.node.Node):
     # -- input -----------------------------------------------------------------------------------
     def add_sample(self, stream: str, t_ns: int, payload: Any) -> None:
         self.last_data_wall = time.monotonic()
+        if self.resumed_from_ns is not None and self.data_gap_s is None:
+            self.data_gap_s = (t_ns - self.resumed_from_ns) / 1e9
         for epoch in self.assembler.add(stream, t_ns, payload, self.last_data_wall):
             self._process(epoch)
 
@@ -222,6 +230,7 @@ class EstimatorNode(rclpy.node.Node):
         self.assembler.load_state_dict(state["assembler"])
         self.node_rejections.counts = state["node_rejections"]
         self.get_logger().info(f"resumed from checkpoint {path} at t = {state['t_ns'] / 1e9:.1f} s")
+        self.resumed_from_ns = int(state["t_ns"])
         return int(state["t_ns"])
 
     def save_checkpoint(self, t_ns: int) -> None:
@@ -256,12 +265,26 @@ class EstimatorNode(rclpy.node.Node):
         self.reported_rejections = counts
         level, text = health(estimate.nis_mean if estimate else float("nan"),
                              bool(estimate and estimate.determined), starved, fresh)
+        now = time.monotonic()
+        # the health timer ticks every second: a much longer gap means this process was not run
+        # (SIGSTOP, or a starved CPU) and its input queued up meanwhile
+        paused_s = now - self.last_health_wall - 1.0
+        self.last_health_wall = now
+        if paused_s > PAUSE_REPORTED_AFTER_S:
+            level, text = "WARN", f"paused: not scheduled for {paused_s:.1f} s (stopped or starved of CPU)"
+        if self.data_gap_s is not None and not self.resume_reported:
+            self.resume_reported = True
+            level, text = "WARN", (f"resumed from checkpoint at t = {self.resumed_from_ns / 1e9:.1f} s after a "
+                                   f"restart; data gap {self.data_gap_s:.1f} s (samples published meanwhile "
+                                   "are lost to this estimate)")
         if waiting_for and level == "OK":
             text = f"waiting for {waiting_for}"
         status = diagnostic(self.get_name(), level, text, {
             "method": self.p["method"], "samples_used": int(estimate.n_samples) if estimate else 0,
             "rejected": counts, "nis_mean": None if estimate is None else estimate.nis_mean,
-            "last_stamp_s": None if estimate is None else estimate.t_s})
+            "last_stamp_s": None if estimate is None else estimate.t_s, "paused_s": max(paused_s, 0.0),
+            "resumed_from_s": None if self.resumed_from_ns is None else self.resumed_from_ns / 1e9,
+            "data_gap_s": self.data_gap_s})
         array = messages.diagnostic_msgs.DiagnosticArray(status=[status])
         set_stamp(array.header, round(estimate.t_s * 1e9) if estimate is not None and np.isfinite(estimate.t_s) else 0)
         self.diag_pub.publish(array)

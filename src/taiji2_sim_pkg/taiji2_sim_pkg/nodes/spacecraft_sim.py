@@ -47,6 +47,10 @@ WALL_CLOCK_EPOCH_NS = 10**9 * _NS
 _MAX_CHUNK_STEPS = 100
 
 
+#: the 1-s diagnostics timer this much later than due is reported as a pause of the process [s]
+_PAUSE_REPORTED_AFTER_S = 2.0
+
+
 def _descriptor(description: str, **ranges: tuple[float, float]) -> Any:
     rcl = messages.rcl_interfaces
     descriptor = rcl.ParameterDescriptor(description=description)
@@ -105,6 +109,10 @@ class SpacecraftSim(rclpy.node.Node):
         if len(self._wait_subscribers) != 3:
             raise ValueError("wait_for_subscribers: expected 3 counts (star tracker, GRS1, GRS2), "
                              f"got {list(self._wait_subscribers)}")
+        self._resubscribe_timeout_s = dp("resubscribe_timeout_s", 60.0, _descriptor(
+            "accelerated: when a subscriber counted by wait_for_subscribers goes away (killed, restarting), "
+            "hold the run this long for it to come back, then go on without it [s]",
+            float_range=(0.0, 86400.0))).value
         self._exit_when_done = dp("exit_when_done", True, _descriptor("shut down after duration_s")).value
         self._publish_truth = dp("publish_truth", True, _descriptor("publish ground truth under /taiji2/sim/")).value
         self._linger_s = dp("linger_s", 1.0, _descriptor(
@@ -125,6 +133,11 @@ class SpacecraftSim(rclpy.node.Node):
         self._waiting_since = time.monotonic()
         self._late_commands = 0
         self._time_base_mismatches = 0
+        self._last_diag_wall = time.monotonic()
+        self._lost_since: float | None = None  # wall time [s] a counted subscriber went missing
+        self._held_s = 0.0  # wall time the run was held for lost subscribers [s]
+        self._reported_held_s = 0.0
+        self._reported_late_commands = 0
 
         m = messages
         reliable_all = rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL,
@@ -220,6 +233,24 @@ class SpacecraftSim(rclpy.node.Node):
         pubs = [self._star_pub, *self._grs_pubs]
         return all(p.get_subscription_count() >= n for p, n in zip(pubs, self._wait_subscribers, strict=True))
 
+    def _subscribers_missing(self) -> bool:
+        """True while a subscriber counted by wait_for_subscribers is gone and resubscribe_timeout_s has not
+        passed: the run is held so that a restarted estimator or recorder loses no more than it had."""
+        if self._ready_to_start():
+            if self._lost_since is not None:
+                held = time.monotonic() - self._lost_since
+                self._held_s += held
+                self.get_logger().info(f"subscribers back after {held:.1f} s; run continues")
+                self._lost_since = None
+            return False
+        now = time.monotonic()
+        if self._lost_since is None:
+            self._lost_since = now
+            self.get_logger().warn(
+                f"a subscriber of the raw topics went away at t = {self._time_ns() / _NS:.1f} s: holding the run "
+                f"up to {self._resubscribe_timeout_s:g} s for it to come back")
+        return now - self._lost_since <= self._resubscribe_timeout_s
+
     def _publish_clock(self) -> None:
         clock = messages.rosgraph_msgs.Clock()
         clock.clock.sec, clock.clock.nanosec = divmod(self._time_ns(), _NS)
@@ -237,6 +268,9 @@ class SpacecraftSim(rclpy.node.Node):
             if self._sync:
                 self._step_while_commanded()  # a command may have arrived before the start
             return
+        if self._subscribers_missing():
+            self._waiting_since = time.monotonic()  # not the commander's fault
+            return
         if not self._sync:
             for _ in range(10):  # a burst per tick keeps the executor responsive to commands
                 if self._done:
@@ -244,6 +278,7 @@ class SpacecraftSim(rclpy.node.Node):
                 self._step_once()
                 self._publish_clock()
             return
+        self._step_while_commanded()  # after a hold: the commands that arrived meanwhile
         if time.monotonic() - self._waiting_since > self._command_timeout_s:
             self._late_commands += 1
             self.get_logger().warn(
@@ -260,7 +295,7 @@ class SpacecraftSim(rclpy.node.Node):
     def _step_while_commanded(self) -> None:
         # every step whose command is already known is simulated in one vectorised call (identical
         # to stepping one by one); /clock then jumps to the end of the chunk
-        while self._started and not self._done:
+        while self._started and not self._done and not self._subscribers_missing():
             steps = min(self._schedule.covered_steps(self._time_ns(), self._dt_ns), _MAX_CHUNK_STEPS,
                         self._n_steps - self._sim.step_index)
             if steps <= 0:
@@ -344,9 +379,44 @@ class SpacecraftSim(rclpy.node.Node):
                                                    for p in (self._star_pub, *self._grs_pubs)),
                   "sim_time_s": self._time_ns() / _NS}
         status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in values.items()]
-        array = d.DiagnosticArray(status=[status])
+        array = d.DiagnosticArray(status=[status, self._data_flow_status()])
         _stamp(array.header, self._time_ns())
         self._diag_pub.publish(array)
+
+    def _data_flow_status(self) -> Any:
+        """WARN naming what disturbed the run since the last report: a pause of this process, a silent
+        commander (steps taken with the last command), writes given up for a stalled reliable reader."""
+        d = messages.diagnostic_msgs
+        now = time.monotonic()
+        # this status goes out every second: a much longer gap means this process was not run
+        paused_s = max(now - self._last_diag_wall - 1.0, 0.0)
+        self._last_diag_wall = now
+        dropped = sum(getattr(p, "samples_dropped", 0) for p in (self._star_pub, *self._grs_pubs))
+        late = self._late_commands - self._reported_late_commands
+        self._reported_late_commands = self._late_commands
+        held_s = self._held_s + (0.0 if self._lost_since is None else now - self._lost_since)
+        new_hold_s = held_s - self._reported_held_s
+        self._reported_held_s = held_s
+        problems = []
+        if new_hold_s > 0.0:
+            problems.append(f"subscriber lost: run held {held_s:.1f} s for it to come back")
+        if paused_s > _PAUSE_REPORTED_AFTER_S:
+            problems.append(f"paused: not scheduled for {paused_s:.1f} s (stopped or starved of CPU)")
+        if late > 0:
+            problems.append(f"commander late: {late} steps taken with the last command after "
+                            f"{self._command_timeout_s} s without one")
+        if dropped:
+            problems.append(f"{dropped} samples given up for a stalled reliable subscriber")
+        if self._time_base_mismatches:
+            problems.append(f"{self._time_base_mismatches} commands on another time base")
+        status = d.DiagnosticStatus(name="spacecraft_sim: data flow", hardware_id="taiji2_sim",
+                                    message="; ".join(problems) or "nominal")
+        status.level = d.DiagnosticStatus.WARN if problems else d.DiagnosticStatus.OK
+        values = {"paused_s": paused_s, "held_for_subscribers_s": held_s, "late_commands": self._late_commands,
+                  "publisher_samples_dropped": dropped,
+                  "time_base_mismatches": self._time_base_mismatches}
+        status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in values.items()]
+        return status
 
 
 class _TruthPublishers:

@@ -1,0 +1,185 @@
+"""The calibration graph as separate processes, with a monitor node in the test process, for fault injection.
+
+spacecraft_sim (accelerated, lock-step with the commander), maneuver_commander, the two estimators
+(with checkpoint files) and a bag recorder of every topic run as `taiji2 run` / `taiji2 bag record`
+subprocesses, as a user starts them. The monitor keeps the latest estimate of each topic and every
+/diagnostics status seen, so a test can ask whether a fault was named there.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from taiji2_runtime.ros import messages, rclpy
+
+from support import PYTHON, python_subprocess_env
+
+_NS = 1_000_000_000
+NODES = ("spacecraft_sim", "maneuver_commander", "scale_factor_estimator", "com_offset_estimator", "recorder")
+ESTIMATORS = ("scale_factor_estimator", "com_offset_estimator")
+RAW_TOPICS = ("/taiji2/star_tracker", "/taiji2/grs1/voltages", "/taiji2/grs2/voltages")
+ESTIMATE_TOPICS = tuple(f"/taiji2/estimates/grs{g}/{k}" for g in (1, 2) for k in ("scale_factors", "com_offset"))
+#: 600 s simulated: the c.m.-offset estimate is determined after a few minutes of the square wave
+#: (docs/estimators.md), and the run takes ~20 s of wall time on an idle core
+DURATION_S = 600.0
+SEED = 4
+
+
+@dataclass
+class Diagnostic:
+    name: str
+    level: int
+    message: str
+    values: dict[str, Any]
+
+
+@dataclass
+class Graph:
+    """One graph run under ``root``; ``start()``, inject faults, ``wait_for_end()``, ``stop()``."""
+
+    root: Path
+    context: Any
+    duration_s: float = DURATION_S
+    recorder_extra: list[str] = field(default_factory=list)
+    procs: dict[str, subprocess.Popen] = field(default_factory=dict)
+    bags: list[Path] = field(default_factory=list)
+    diagnostics: list[Diagnostic] = field(default_factory=list)
+    latest: dict[str, Any] = field(default_factory=dict)
+    exit_codes: dict[str, list[int]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.root.mkdir(parents=True, exist_ok=True)
+        self.node = rclpy.node.Node("fault_monitor", context=self.context)
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        t = messages.taiji2_msgs
+        qos = rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL)
+        for topic in ESTIMATE_TOPICS:
+            cls = t.ScaleFactorEstimate if topic.endswith("scale_factors") else t.ComOffsetEstimate
+            self.node.create_subscription(cls, topic, lambda m, k=topic: self.latest.__setitem__(k, m), qos)
+        self.node.create_subscription(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", self._on_diag, 100)
+
+    # -- processes -------------------------------------------------------------------------------
+    def argv(self, name: str) -> list[str]:
+        est = ["--ros-args", "-p", "layout:=type1", "-p", f"checkpoint_file:={self.root / (name + '.ckpt')}"]
+        if name in ESTIMATORS:
+            return ["run", "taiji2_estimator_pkg", name, *est]
+        if name == "maneuver_commander":
+            return ["run", "taiji2_sim_pkg", name, "--ros-args", "-p", "preset:=type1", "-p", "use_sim_time:=true",
+                    "-p", "lookahead_s:=2.0"]
+        if name == "spacecraft_sim":
+            # star tracker: scale-factor estimator + recorder; each GRS: both estimators + recorder
+            return ["run", "taiji2_sim_pkg", name, "--ros-args", "-p", "layout:=type1", "-p", f"seed:={SEED}",
+                    "-p", f"duration_s:={self.duration_s}", "-p", "wait_for_subscribers:=[2, 3, 3]",
+                    "-p", "exit_when_done:=false", "-p", "publish_truth:=false",
+                    "-p", "config_overrides:=" + json.dumps([f"maneuver.duration_s={self.duration_s}"])]
+        bag = self.root / f"bag{len(self.bags)}"
+        self.bags.append(bag)
+        return ["bag", "record", "-a", "-o", str(bag), *self.recorder_extra]
+
+    def spawn(self, name: str) -> None:
+        log = (self.root / f"{name}.log").open("a")
+        self.procs[name] = subprocess.Popen([PYTHON, "-m", "taiji2_runtime.cli.main", *self.argv(name)],
+                                            stdout=log, stderr=subprocess.STDOUT, env=python_subprocess_env())
+
+    def start(self) -> None:
+        for name in NODES:
+            self.spawn(name)
+
+    def log(self, name: str) -> str:
+        return (self.root / f"{name}.log").read_text(errors="replace")
+
+    def dead(self) -> list[str]:
+        """Nodes that exited (none should until ``stop()``)."""
+        return [n for n, p in self.procs.items() if p.poll() is not None]
+
+    def kill_and_restart(self, name: str) -> None:
+        proc = self.procs[name]
+        proc.send_signal(signal.SIGKILL)
+        self.exit_codes.setdefault(name, []).append(proc.wait(timeout=10))
+        self.spawn(name)
+
+    def stall(self, name: str, seconds: float) -> None:
+        """SIGSTOP ``name`` for ``seconds`` of wall time, spinning the monitor meanwhile, then SIGCONT."""
+        os.kill(self.procs[name].pid, signal.SIGSTOP)
+        try:
+            self.spin_for(seconds)
+        finally:
+            os.kill(self.procs[name].pid, signal.SIGCONT)
+
+    def stop(self) -> dict[str, int]:
+        """SIGINT every node; their exit codes (a clean stop is 0)."""
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        codes = {}
+        for name, proc in self.procs.items():
+            try:
+                codes[name] = proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                codes[name] = -9
+        self.executor.shutdown()
+        self.node.destroy_node()
+        return codes
+
+    # -- monitor ---------------------------------------------------------------------------------
+    def _on_diag(self, msg: Any) -> None:
+        for s in msg.status:
+            values = {}
+            for kv in s.values:
+                try:
+                    values[kv.key] = json.loads(kv.value)
+                except ValueError:
+                    values[kv.key] = kv.value
+            self.diagnostics.append(Diagnostic(s.name, int.from_bytes(s.level, "little") if isinstance(
+                s.level, bytes) else int(s.level), s.message, values))
+
+    def spin_for(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def spin_until(self, predicate: Any, timeout_s: float, what: str) -> None:
+        deadline = time.monotonic() + timeout_s
+        while not predicate():
+            assert time.monotonic() < deadline, f"timed out after {timeout_s} s waiting for {what}"
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def stamp_s(self, topic: str) -> float:
+        m = self.latest.get(topic)
+        return -1.0 if m is None else m.header.stamp.sec + m.header.stamp.nanosec / _NS
+
+    def progress_s(self) -> float:
+        """Simulated time every estimate has reached [s] (-1 before the first of each)."""
+        return min(self.stamp_s(t) for t in ESTIMATE_TOPICS)
+
+    def wait_for_progress(self, t_s: float, timeout_s: float = 60.0) -> None:
+        self.spin_until(lambda: self.progress_s() >= t_s, timeout_s, f"the estimates to reach t = {t_s} s")
+
+    def wait_for_end(self, timeout_s: float = 120.0) -> None:
+        self.wait_for_progress(self.duration_s, timeout_s)
+
+    def named(self, *words: str) -> list[Diagnostic]:
+        """Non-OK /diagnostics statuses whose message contains every one of ``words``."""
+        return [d for d in self.diagnostics if d.level > 0 and all(w in d.message for w in words)]
+
+    def estimates(self) -> dict[str, tuple[np.ndarray, np.ndarray, int, int]]:
+        """topic -> (value, 1-sigma, samples used, samples rejected) of the latest estimate."""
+        out = {}
+        for topic, m in self.latest.items():
+            if topic.endswith("scale_factors"):
+                value, cov = np.array(m.scale_factors), np.reshape(m.covariance, (3, 3))
+            else:
+                value, cov = np.array([m.offset.x, m.offset.y, m.offset.z]), np.reshape(m.covariance, (3, 3))
+            out[topic] = (value, np.sqrt(np.diag(cov)), int(m.samples_used), int(m.samples_rejected))
+        return out
