@@ -125,3 +125,27 @@ def test_design_cli_writes_the_files_and_beats_or_matches_the_paper(tmp_path):
     assert np.max(usage["thrust_peak_n"]) <= 1e-4
     assert load_maneuver_file(out / "maneuver.yaml").duration_s == 500.0
     assert (out / "report.md").read_text().count("| grs") == 12
+
+
+def test_a_spent_budget_evaluates_no_more_candidates(problem):
+    """The budget is checked before every evaluation, not only once per generation (a generation of
+    the square family is 2 x 21 candidates of a bound each): with no budget nothing is evaluated and
+    the search returns its start, the paper's preset."""
+    from taiji2_estimator_pkg.design.optimize import optimize
+
+    lines: list[str] = []
+    result = optimize(problem, "square", 1000.0, Constraints(), seed=1, budget_s=0.0, progress=lines.append)
+    assert result.evaluations == 0
+    paper = problem.config.maneuver
+    fam = family("square")
+    start = np.clip(fam.paper_start(paper.period_s, paper.amplitude_n_m, paper.phase_s),
+                    [b[0] for b in fam.bounds], [b[1] for b in fam.bounds])
+    np.testing.assert_array_equal(result.x, start)
+    assert lines and "0 evaluations" in lines[-1]
+
+
+@pytest.mark.parametrize("value", ["0", "nan", "-5"])
+def test_bad_time_limit_is_one_line(tmp_path, capsys, value):
+    status = taiji2(["design", "--layout", "type1", "--time-limit-s", value, "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip()
+    assert status == 2 and len(err.splitlines()) == 1 and "--time-limit-s" in err, err

@@ -28,6 +28,8 @@ __all__ = ["Constraints", "DesignResult", "InfeasibleError", "check_feasible", "
 
 _REFERENCE_N_M = 1e-6
 _SHRINK = 0.995  # safety factor after the O(omega^2) non-linearity of the range check
+_SKIPPED = 1e3  # objective of a candidate not evaluated (budget spent) or infeasible
+_PROGRESS_EVERY_S = 15.0
 
 
 @dataclass(frozen=True)
@@ -119,21 +121,29 @@ def optimize(problem: DesignProblem, family_name: str, duration_s: float, constr
     x0 = np.clip(fam.paper_start(paper.period_s, paper.amplitude_n_m, paper.phase_s),
                  [b[0] for b in fam.bounds], [b[1] for b in fam.bounds])
     started = time.monotonic()
-    state = {"n": 0, "best": np.inf, "x": x0}
+    state = {"n": 0, "best": np.inf, "x": x0, "said": started}
 
     def objective(x: np.ndarray) -> float:
+        now = time.monotonic()
+        if now - started > budget_s:
+            # scipy checks the callback once per generation (up to 2 x popsize x dim evaluations of
+            # ~1 s): past the budget the rest of the generation is skipped, not evaluated
+            return _SKIPPED
+        if now - state["said"] > _PROGRESS_EVERY_S:
+            callback()
         state["n"] += 1
         try:
             maneuver, _, _ = project(problem, fam, x, duration_s, constraints)
             worst = float(np.max(problem.ratios(maneuver, duration_s, fam.period_s(x), fast=True)))
         except (InfeasibleError, np.linalg.LinAlgError, ValueError):
-            worst = 1e3
+            worst = _SKIPPED
         if worst < state["best"]:
             state["best"], state["x"] = worst, np.array(x)
         return worst
 
     def callback(*_: Any, **__: Any) -> bool:
-        elapsed = time.monotonic() - started
+        state["said"] = time.monotonic()
+        elapsed = state["said"] - started
         say(f"  design {family_name}: {state['n']} evaluations, best max CRLB/requirement "
             f"{state['best']:.3f} ({elapsed:.0f} s)")
         return elapsed > budget_s
