@@ -173,8 +173,13 @@ WRONG_PEER = textwrap.dedent("""
     strings = [node.create_publisher(messages.std_msgs.String, tp, q) for tp in topics]
     # right type, wrong content: GRS voltages on the star-tracker's neighbours with a foreign frame,
     # and a flood at 100x the 10-Hz rate with stamps the stream already passed
-    grs = node.create_publisher(t.GrsVoltages, "/taiji2/grs1/voltages", q)
-    while grs.get_subscription_count() < 3 or min(p.get_subscription_count() for p in strings) < 1:
+    # a DDS participant has one type per topic: the right-type flood comes from a second participant
+    flood_context = rclpy.context.Context()
+    rclpy.init(args=["flood-peer"], context=flood_context)
+    flood_node = rclpy.create_node("fault_flood_peer", context=flood_context)
+    grs = flood_node.create_publisher(t.GrsVoltages, "/taiji2/grs1/voltages", q)
+    # the String writers match no reader (DDS matches type names): they must merely not disturb the graph
+    while grs.get_subscription_count() < 3:
         time.sleep(0.05)  # matched (GRS1: both estimators and the recorder): nothing sent is lost to discovery
     k, start = 0, time.monotonic()
     while rclpy.ok() and time.monotonic() - start < float(FLOOD_S):
