@@ -115,9 +115,12 @@ def _draw_effect(rng: np.random.Generator, families: list[str], sigmas: dict[str
     candidate = by_family[family][int(rng.integers(len(by_family[family])))]
     magnitude = sign * k * sigmas[candidate.key]
     if family == "gravity_gradient":
-        phase = float(rng.uniform(0, 2 * np.pi))
-        theta = np.array([abs(magnitude) * math.cos(phase), abs(magnitude) * math.sin(phase)])
-        spec = candidate.inject(theta, model)
+        # one physical scale drives all three axes: its size is set by the most sensitive axis at k sigma
+        # (through a nearly insensitive axis, k sigma would mean an absurd torque on the other two)
+        rng.uniform(0, 2 * np.pi)  # the phase is fixed by the orbit; drawn only to keep the plan's stream
+        specs = {c.key: c.inject(np.array([k * sigmas[c.key], 0.0]), model) for c in by_family[family]}
+        key = min(specs, key=lambda c: specs[c]["scale"])
+        candidate, spec = next(c for c in by_family[family] if c.key == key), specs[key]
         effect = GravityGradient(orbit_period_s=spec["orbit_period_s"], scale=spec["scale"])
         _, tau_c, tau_s = effect.harmonic_coefficients_n_m(model.inertia_kg_m2)
         truth = {f"gravity_gradient[{'xyz'[a]}]": float(np.hypot(tau_c[a], tau_s[a])) for a in range(3)}
@@ -411,7 +414,7 @@ def main() -> int:
             try:
                 result = future.result()
             except Exception as exc:  # a failed set is reported and counted, the others go on
-                failures.append(f"{type(exc).__name__}: {exc}")
+                failures.append(f"set {plan[futures.index(future)]['index']}: {type(exc).__name__}: {exc}")
                 print(f"set failed: {failures[-1]}", file=sys.stderr, flush=True)
                 continue
             results.append(result)
