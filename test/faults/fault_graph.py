@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import signal
 import subprocess
 import time
@@ -50,6 +51,8 @@ class Graph:
     context: Any
     duration_s: float = DURATION_S
     recorder_extra: list[str] = field(default_factory=list)
+    #: RLIMIT_FSIZE of the recorder [bytes]: every file it writes stops growing there (EFBIG, like ENOSPC)
+    recorder_file_size_limit: int | None = None
     procs: dict[str, subprocess.Popen] = field(default_factory=dict)
     bags: list[Path] = field(default_factory=list)
     diagnostics: list[Diagnostic] = field(default_factory=list)
@@ -88,8 +91,11 @@ class Graph:
 
     def spawn(self, name: str) -> None:
         log = (self.root / f"{name}.log").open("a")
+        limit = self.recorder_file_size_limit if name == "recorder" else None
+        preexec = None if limit is None else (lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit)))
         self.procs[name] = subprocess.Popen([PYTHON, "-m", "taiji2_runtime.cli.main", *self.argv(name)],
-                                            stdout=log, stderr=subprocess.STDOUT, env=python_subprocess_env())
+                                            stdout=log, stderr=subprocess.STDOUT, env=python_subprocess_env(),
+                                            preexec_fn=preexec)
 
     def start(self) -> None:
         for name in NODES:

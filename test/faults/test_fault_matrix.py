@@ -214,3 +214,31 @@ def test_wrong_type_peers_and_a_flooded_raw_topic(graph_context, tmp_path, refer
                 max_gap_over_bound=max(gaps.values()), peer_stderr=err[-300:])
     finally:
         _assert_clean_stop(graph)
+
+
+def test_recorder_on_a_storage_that_fills_up(graph_context, tmp_path, reference):
+    # 1.5 MB per file: the recorder's open segment hits it a few times in the run (the graph's
+    # messages make ~6 MB), and each journal (0.5 s of wall time) stays far below it
+    graph = Graph(tmp_path, graph_context, recorder_file_size_limit=1_500_000)
+    graph.start()
+    try:
+        graph.wait_for_end()
+        graph.spin_for(1.0)  # the recorder's last status
+        gaps = _assert_within_sigma(graph, reference)  # the estimators did not notice
+        failed = graph.named("bag storage failed")
+        assert failed, [d.message for d in graph.diagnostics if d.level > 0][:20]
+    finally:
+        _assert_clean_stop(graph)
+    stamps = _bag_stamps(graph.bags[0])  # the bag opens: every file it lists is complete
+    log = graph.log("recorder")
+    dropped = int(log.split(" messages received but not recorded: bag storage failed")[0].rsplit(None, 1)[-1])
+    total = sum(len(v) for v in stamps.values())
+    expected = list(range(100_000_000, round(graph.duration_s * 1e9) + 1, 100_000_000))
+    for topic in RAW_TOPICS:
+        got = stamps[topic]
+        assert got == sorted(set(got)) and got[0] == expected[0], f"{topic}: in order, from the first sample"
+        assert set(got) <= set(expected), topic
+    lost = {t: len(expected) - len(stamps[t]) for t in RAW_TOPICS}
+    assert 0 < sum(lost.values()) <= dropped, (lost, dropped)  # every raw sample lost was counted as dropped
+    _report("storage full (1.5 MB file limit)", "recorder", raw_samples_in_bag=total, raw_samples_lost=lost,
+            dropped_messages_counted=dropped, failures=len(failed), max_gap_over_bound=max(gaps.values()))

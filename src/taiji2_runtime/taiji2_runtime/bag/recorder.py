@@ -8,6 +8,10 @@ reliable, transient-local when they latch). The bag stamp of a message is its re
 its callback runs) on the recorder's clock, as rosbag2 does: system time, or with the node's
 ``use_sim_time`` the latest ``/clock``, followed in a thread of its own so it stays current while
 the executor drains a backlog. The messages themselves are stored byte for byte.
+
+A storage failure (disk full, file-size limit) does not stop the recording: it is logged and
+published on ``/diagnostics`` (ERROR, then WARN once writing works again, each naming the count of
+messages not recorded); the bag keeps everything written before it (see :mod:`.writer`).
 """
 
 from __future__ import annotations
@@ -25,7 +29,15 @@ from taiji2_runtime.interfaces import typestore
 
 from .contract import CLOCK_TOPIC, PROVENANCE_TOPIC
 from .provenance import recorder_provenance, simulator_provenance
-from .runtime_adapter import PublisherQosProbe, message_class, raw_subscription_kwargs, subscription_qos, to_cdr
+from .runtime_adapter import (
+    PublisherQosProbe,
+    diagnostic_array,
+    diagnostic_array_class,
+    message_class,
+    raw_subscription_kwargs,
+    subscription_qos,
+    to_cdr,
+)
 from .writer import BagWriter
 
 
@@ -82,6 +94,9 @@ class RecordReport:
     types: dict[str, str]
     skipped: dict[str, str]
     missing: list[str]
+    #: messages received (in ``counts``) but not written because the storage failed, and the last failure
+    dropped: int = 0
+    storage_error: str | None = None
 
 
 class _ClockFollower:
@@ -200,6 +215,8 @@ class Recorder:
         self._last_discovery = 0.0
         self._clock: _ClockFollower | _NodeClock = _ClockFollower(node) if _uses_sim_time(node) else _NodeClock(node)
         self.stopped = False
+        self._storage_failures_reported = (0, True)
+        self._diagnostics = node.create_publisher(diagnostic_array_class(), "/diagnostics", 10)
         self.discover()
 
     # -- selection -------------------------------------------------------------------------------
@@ -279,10 +296,30 @@ class Recorder:
         if now - self._last_discovery >= self.options.discovery_period_s:
             self.discover()
         self.writer.poll(now)
+        self._report_storage()
         limit = self.options.max_duration_s
         if limit is not None and self._first_stamp_ns is not None:
             if self._clock.now_ns() - self._first_stamp_ns >= limit * 1e9:
                 self.stopped = True
+
+    def _report_storage(self) -> None:
+        """One log line and one /diagnostics status per storage failure and per recovery."""
+        writer = self.writer
+        state = (writer.failure_count, writer.storage_error is None)
+        if state == self._storage_failures_reported:
+            return
+        self._storage_failures_reported = state
+        if writer.storage_error is not None:
+            level, text = "ERROR", (f"bag storage failed ({writer.storage_error}): recording suspended, retried "
+                                    f"every {writer.retry_period_s:g} s; {writer.dropped_count} messages not "
+                                    f"recorded so far; the bag keeps everything written before")
+        else:
+            level, text = "WARN", (f"bag storage writing again after {writer.failure_count} failure(s); "
+                                   f"{writer.dropped_count} messages not recorded")
+        self._log(("error: " if level == "ERROR" else "warning: ") + text)
+        self._diagnostics.publish(diagnostic_array(self.node, level, text, {
+            "bag": str(self.options.output), "dropped_messages": writer.dropped_count,
+            "storage_failures": writer.failure_count}))
 
     @property
     def message_count(self) -> int:
@@ -299,6 +336,7 @@ class Recorder:
         self._subscriptions.clear()
         self._clock.close()
         self.writer.close()
+        self._report_storage()
         missing = [t for t in self.options.topics if t not in self._types and t not in self._skipped]
         return RecordReport(self.options.output, dict(self._counts), dict(self._types), dict(self._skipped),
-                            missing)
+                            missing, self.writer.dropped_count, self.writer.last_storage_error)

@@ -197,3 +197,20 @@ def publisher_qos(recorded: list[Qos]) -> Any:
     return q.QoSProfile(
         history=q.HistoryPolicy.KEEP_ALL, reliability=q.ReliabilityPolicy.RELIABLE,
         durability=q.DurabilityPolicy.TRANSIENT_LOCAL if transient else q.DurabilityPolicy.VOLATILE)
+
+
+def diagnostic_array_class() -> type:
+    """``diagnostic_msgs/DiagnosticArray`` of the running client library."""
+    return messages.diagnostic_msgs.DiagnosticArray
+
+
+def diagnostic_array(node: Any, level_name: str, message: str, values: dict[str, Any]) -> Any:
+    """A one-status DiagnosticArray named after ``node``, ``level_name`` in OK/WARN/ERROR, values as text."""
+    d = messages.diagnostic_msgs
+    status = d.DiagnosticStatus(name=node.get_name(), message=message, hardware_id="taiji2_bag_record")
+    status.level = getattr(d.DiagnosticStatus, level_name)
+    status.values = [d.KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
+    array = d.DiagnosticArray()
+    array.header.stamp = node.get_clock().now().to_msg()
+    array.status = [status]
+    return array

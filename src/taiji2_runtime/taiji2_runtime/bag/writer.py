@@ -17,6 +17,11 @@ last ``journal_period_s`` plus the time to close a file); every listed file is c
 metadata follows rosbag2 version 8 (readable by rosbags, ``ros2 bag`` Humble and later, and MCAP
 tools, which also find the message definitions in every file). Intermediate metadata is written
 as JSON (a YAML subset) for speed; the final one as block YAML.
+
+A storage failure (disk full, file-size limit, I/O error) never ends the recording: the open files
+are dropped (at most one journal period of data), the closed journals of the open segment become
+files of the bag in their own right, and messages are counted as dropped until a retry (every
+``retry_period_s``) opens a new segment that can be written. What the bag listed stays readable.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import sqlite3
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,6 +55,8 @@ def _type_hash(store: Typestore, msgtype: str) -> str:
 
 STORAGES = {"mcap": (StoragePlugin.MCAP, ".mcap"), "sqlite3": (StoragePlugin.SQLITE3, ".db3")}
 _VERSION = 8
+#: what a full disk, a file-size limit or an I/O error raises from the storage plugins
+_STORAGE_ERRORS = (OSError, sqlite3.Error)
 _INCOMING = ".incoming"
 
 
@@ -136,6 +144,9 @@ class BagWriter:
     segment_period_s : float
         Wall time [s] after which the open segment file is closed and a new one started
         (``inf``: one file per recording).
+    retry_period_s : float
+        Wall time [s] between attempts to write again after a storage failure (each attempt opens
+        two files; what arrives in between is dropped and counted).
 
     Raises
     ------
@@ -144,12 +155,13 @@ class BagWriter:
     """
 
     def __init__(self, path: str | Path, store: Typestore, *, storage: str = "mcap",
-                 journal_period_s: float = 0.5, segment_period_s: float = 300.0) -> None:
+                 journal_period_s: float = 0.5, segment_period_s: float = 300.0, retry_period_s: float = 0.5
+                 ) -> None:
         self.path = Path(path)
         if storage not in STORAGES:
             raise BagError(self.path, f"unknown storage {storage!r} (expected mcap or sqlite3)")
-        if not journal_period_s > 0 or not segment_period_s > 0:
-            raise BagError(self.path, "journal and segment periods must be positive")
+        if not journal_period_s > 0 or not segment_period_s > 0 or not retry_period_s > 0:
+            raise BagError(self.path, "journal, segment and retry periods must be positive")
         if self.path.exists():
             raise BagError(self.path, "already exists; choose another output (-o) or remove it")
         try:
@@ -172,6 +184,15 @@ class BagWriter:
         self._segment_index = 0
         self._journal_index = 0
         self._closed = False
+        self.retry_period_s = float(retry_period_s)
+        #: the storage failure in force (None while writing works), the last one, and when (monotonic s)
+        self.storage_error: str | None = None
+        self.last_storage_error: str | None = None
+        self._failed_at = 0.0
+        #: messages not written because the storage failed (the dropped open files included)
+        self.dropped_count = 0
+        #: storage failures so far
+        self.failure_count = 0
         self._publish_metadata(final=False)
 
     # -- topics and custom data ----------------------------------------------------------------
@@ -215,40 +236,61 @@ class BagWriter:
 
     # -- writing ---------------------------------------------------------------------------------
     def write(self, handle: int, stamp_ns: int, data: bytes) -> None:
-        """Write one serialised message (CDR with encapsulation header) stamped ``stamp_ns`` [ns]."""
+        """Write one serialised message (CDR with encapsulation header) stamped ``stamp_ns`` [ns].
+
+        A storage failure is recorded in :attr:`storage_error` and counted, never raised.
+        """
         if self._closed:
             raise BagError(self.path, "write after close")
         now = time.monotonic()
-        if self._segment is None:
-            self._segment = _StorageFile(self.path, f"{self.path.name}_{self._segment_index}", self.storage,
-                                         self._topics)
-            self._segment_opened = now
-        if self._journal is None:
-            name = f"{self.path.name}_{self._segment_index}_part{self._journal_index}"
-            self._journal = _StorageFile(self.path, name, self.storage, self._topics)
-            self._journal_index += 1
-            self._journal_opened = now
-        self._segment.write(handle, stamp_ns, data)
-        self._journal.write(handle, stamp_ns, data)
+        if self.storage_error is not None and now - self._failed_at < self.retry_period_s:
+            self.dropped_count += 1
+            return
+        try:
+            if self._segment is None:
+                self._segment = _StorageFile(self.path, f"{self.path.name}_{self._segment_index}", self.storage,
+                                             self._topics)
+                self._segment_opened = now
+            if self._journal is None:
+                name = f"{self.path.name}_{self._segment_index}_part{self._journal_index}"
+                self._journal = _StorageFile(self.path, name, self.storage, self._topics)
+                self._journal_index += 1
+                self._journal_opened = now
+            self._segment.write(handle, stamp_ns, data)
+            self._journal.write(handle, stamp_ns, data)
+        except _STORAGE_ERRORS as exc:
+            self._fail(exc, now, pending=1)
+            return
+        self.storage_error = None
         if now - self._journal_opened >= self._journal_period_s:
             self.poll(now)
 
     def poll(self, now: float | None = None) -> None:
         """Close the journal / segment when their wall-time period is over (call a few times per second)."""
         now = time.monotonic() if now is None else now
-        if self._segment is not None and now - self._segment_opened >= self._segment_period_s:
-            self._close_segment()
-        elif self._journal is not None and now - self._journal_opened >= self._journal_period_s:
-            self._close_journal()
+        try:
+            if self._segment is not None and now - self._segment_opened >= self._segment_period_s:
+                self._close_segment()
+            elif self._journal is not None and now - self._journal_opened >= self._journal_period_s:
+                self._close_journal()
+        except _STORAGE_ERRORS as exc:
+            self._fail(exc, now)
 
     def close(self) -> None:
         """Close the open files and write the final metadata; removes ``.incoming/``."""
         if self._closed:
             return
-        if self._segment is not None:
-            self._close_segment(final=True)
-        else:
-            self._publish_metadata(final=True)
+        try:
+            if self._segment is not None:
+                self._close_segment(final=True)
+            else:
+                self._publish_metadata(final=True)
+        except _STORAGE_ERRORS as exc:
+            self._fail(exc, time.monotonic())
+            try:
+                self._publish_metadata(final=True)
+            except OSError:
+                pass  # the last metadata written still lists only complete files
         self._closed = True
         shutil.rmtree(self.path / _INCOMING, ignore_errors=True)
 
@@ -261,18 +303,44 @@ class BagWriter:
         self._closed = True
 
     # -- internals -------------------------------------------------------------------------------
+    def _fail(self, exc: Exception, now: float, pending: int = 0) -> None:
+        """Drop the open files after a storage failure; their closed journals stay in the bag."""
+        # the open journal's messages: those of the open segment not in a closed journal
+        lost = pending + (self._segment.stats.count - sum(j.count for j in self._journals)
+                          if self._segment is not None else 0)
+        for open_file in (self._journal, self._segment):
+            if open_file is not None:
+                try:
+                    open_file.abort()
+                except Exception:  # a writer broken by the failure: its work directory is gone anyway
+                    pass
+        self._journal = self._segment = None
+        # the open segment is lost: its closed journals are the bag's record of that time
+        self._segments.extend(self._journals)
+        self._journals = []
+        self._segment_index += 1
+        self._journal_index = 0
+        self.dropped_count += lost
+        self.failure_count += 1
+        self.storage_error = self.last_storage_error = getattr(exc, "strerror", None) or str(exc)
+        self._failed_at = now
+        try:
+            self._publish_metadata(final=False)
+        except OSError:
+            pass  # the metadata on disk lists the same files (journals were listed already)
+
     def _close_journal(self) -> None:
-        journal, self._journal = self._journal, None
-        if journal is not None:
-            self._journals.append(journal.close(self._custom))
+        if self._journal is not None:
+            self._journals.append(self._journal.close(self._custom))  # on failure still open: _fail drops it
+            self._journal = None
             self._publish_metadata(final=False)
 
     def _close_segment(self, final: bool = False) -> None:
         self._close_journal()
-        segment, self._segment = self._segment, None
-        if segment is None:
+        if self._segment is None:
             return
-        self._segments.append(segment.close(self._custom))
+        self._segments.append(self._segment.close(self._custom))  # on failure still open: _fail drops it
+        self._segment = None
         dropped, self._journals = self._journals, []
         self._publish_metadata(final=final)
         for stats in dropped:

@@ -144,13 +144,17 @@ def _record(args: argparse.Namespace) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     total = sum(report.counts.values())
-    print(f"recorded {total} messages on {len(report.counts)} topics into {report.path}", file=sys.stderr)
+    print(f"recorded {total - report.dropped} messages on {len(report.counts)} topics into {report.path}",
+          file=sys.stderr)
     for topic in sorted(report.counts):
         print(f"  {topic} [{report.types[topic]}]: {report.counts[topic]}", file=sys.stderr)
     for topic, reason in sorted(report.skipped.items()):
         print(f"  {topic}: not recorded ({reason})", file=sys.stderr)
     for topic in report.missing:
         print(f"  {topic}: never published", file=sys.stderr)
+    if report.dropped:
+        print(f"  {report.dropped} messages received but not recorded: bag storage failed ({report.storage_error})",
+              file=sys.stderr)
     return 0
 
 
