@@ -178,6 +178,11 @@ WRONG_PEER = textwrap.dedent("""
     rclpy.init(args=["flood-peer"], context=flood_context)
     flood_node = rclpy.create_node("fault_flood_peer", context=flood_context)
     grs = flood_node.create_publisher(t.GrsVoltages, "/taiji2/grs1/voltages", q)
+    # malformed CDR: a truncated GrsVoltages payload handed to Cyclone DDS below the rclpy API
+    from cyclonedds._clayer import ddspy_write
+    from cyclonedds.pub import DataWriter
+    raw = DataWriter(flood_context.participant(), flood_context.topic("rt/taiji2/grs2/voltages", t.GrsVoltages))
+    malformed = refused = 0
     # the String writers match no reader (DDS matches type names): they must merely not disturb the graph
     while grs.get_subscription_count() < 3:
         time.sleep(0.05)  # matched (GRS1: both estimators and the recorder): nothing sent is lost to discovery
@@ -189,8 +194,11 @@ WRONG_PEER = textwrap.dedent("""
         msg.header.frame_id = "tmrf1"
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(k * 1_000_000, 1_000_000_000)
         grs.publish(msg)
+        malformed += 1
+        refused += ddspy_write(raw._ref, b"\\x00\\x01\\x00\\x00" + b"\\xff" * 7 + b"\\x00") < 0
         k += 1
         time.sleep(0.001)
+    print(malformed, refused, flush=True)
     print(k, flush=True)
 """)
 
@@ -208,9 +216,15 @@ def test_wrong_type_peers_and_a_flooded_raw_topic(graph_context, tmp_path, refer
         graph.wait_for_end()
         gaps = _assert_within_sigma(graph, reference)
         samples = _samples(graph)
-        flooded = int(out.strip().splitlines()[-1]) if out.strip() else 0
+        lines = out.strip().splitlines()
+        flooded = int(lines[-1]) if lines else 0
+        malformed, refused = map(int, lines[-2].split()) if len(lines) > 1 else (0, 0)
         assert graph.named("rejected input"), [d.message for d in graph.diagnostics if d.level > 0][:20]
-        _report("wrong type + flood 100x", "raw topics", flood_samples=flooded, samples=samples,
+        # Cyclone DDS validates CDR when a sample is written (and again when one is received): a
+        # truncated payload never reaches the wire, so the graph cannot be fed one by a DDS peer
+        assert malformed > 0 and refused == malformed, (malformed, refused, err[-500:])
+        _report("wrong type + malformed CDR + flood 100x", "raw topics", flood_samples=flooded,
+                malformed_cdr_refused_by_dds=refused, samples=samples,
                 max_gap_over_bound=max(gaps.values()), peer_stderr=err[-300:])
     finally:
         _assert_clean_stop(graph)
