@@ -62,7 +62,7 @@ class _Feeder:
 
 
 def test_params_file_and_node_declarations_are_one_source(context):
-    node = ScaleFactorEstimatorNode(context=context, cli_args=["--params-file", str(PARAMS_FILE)])
+    node = ScaleFactorEstimatorNode(context=context, cli_args=["--ros-args", "--params-file", str(PARAMS_FILE)])
     documented = flatten(yaml.safe_load(PARAMS_FILE.read_text())["scale_factor_estimator"]["ros__parameters"])
     documented.pop("grs_ids")  # offline API only (documented so)
     for key, value in documented.items():
@@ -87,7 +87,7 @@ def test_bad_inputs_are_rejected_counted_and_reported_while_the_estimate_goes_on
     feeder = _Feeder(context)
     executor.add_node(node)
     executor.add_node(feeder.node)
-    assert spin_until(executor, lambda: feeder.star.get_subscription_count() == 1)
+    assert spin_until(executor, lambda: feeder.star.get_subscription_count() >= 1)
 
     def corrupt(f, k, t, q, v):
         if k == 500:   # NaN voltage
@@ -143,12 +143,12 @@ def test_bad_inputs_are_rejected_counted_and_reported_while_the_estimate_goes_on
 def test_a_restarted_node_resumes_from_its_checkpoint(context, executor, experiment, tmp_path):
     out = experiment
     checkpoint = Path(tmp_path) / "sf.json"
-    args = ["-p", f"checkpoint_file:={checkpoint}", "-p", "checkpoint_period_s:=10.0"]
+    args = ["--ros-args", "-p", f"checkpoint_file:={checkpoint}", "-p", "checkpoint_period_s:=10.0"]
     feeder = _Feeder(context)
     executor.add_node(feeder.node)
     first = ScaleFactorEstimatorNode(context=context, cli_args=args)
     executor.add_node(first)
-    assert spin_until(executor, lambda: feeder.star.get_subscription_count() == 1)
+    assert spin_until(executor, lambda: feeder.star.get_subscription_count() >= 1)
     half = N // 2
     _feed(feeder, executor, out, range(half))
     half_ns = round(out.t_s[half - 1] * 1e9)
@@ -157,7 +157,7 @@ def test_a_restarted_node_resumes_from_its_checkpoint(context, executor, experim
     assert checkpoint.exists()
     second = ScaleFactorEstimatorNode(context=context, cli_args=args)
     executor.add_node(second)
-    assert spin_until(executor, lambda: feeder.star.get_subscription_count() == 1)
+    assert spin_until(executor, lambda: feeder.star.get_subscription_count() >= 1)
     _feed(feeder, executor, out, range(half, N))
     last_ns = round(out.t_s[-1] * 1e9)
     assert spin_until(executor, lambda: second.last_publish_ns >= last_ns, timeout_s=60)
@@ -182,7 +182,7 @@ def test_a_run_ending_inside_a_publish_period_publishes_its_last_epoch(context, 
                                     d_estimates.append, 100)
     for node in (sf_node, co_node, feeder.node):
         executor.add_node(node)
-    assert spin_until(executor, lambda: feeder.grs[1].get_subscription_count() == 2)
+    assert spin_until(executor, lambda: feeder.grs[1].get_subscription_count() >= 2)
     _feed(feeder, executor, out, range(last + 1))
     last_ns = round(out.t_s[last] * 1e9)
     assert last_ns % 10**9 != 0  # not on a period boundary: the case the periodic publishing misses
