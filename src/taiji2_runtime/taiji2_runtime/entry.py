@@ -64,6 +64,10 @@ def run_node(make_node: Callable[[], Any], args: Sequence[str] | None = None, pr
     except _shutdown_types():
         pass
     except _user_error_types() as exc:
+        # rcl's "failed to initialize wait set: the given context is not valid" when SIGINT shut the
+        # context down while the executor was building its wait set: a clean stop, not bad input
+        if isinstance(exc, RCLError) and _stopping(node):
+            return 0
         report_error(program, exc)
         return EXIT_BAD_INPUT
     except Exception as exc:
