@@ -20,6 +20,8 @@ from cyclonedds.util import duration
 from .service import _DEPTH, _service_id
 from .service_types import service_body_class, service_type_hash, wire_class
 
+#: a request not answered within this long [s] is sent again (see :meth:`ServiceClient.call`)
+_RESEND_S = 1.0
 _POLL_S = 0.05
 
 
@@ -83,10 +85,20 @@ class ServiceClient:
             if time.monotonic() > deadline:
                 raise TimeoutError(f"service {self.service_name} is not available (waited {timeout_s:g} s)")
             time.sleep(_POLL_S)  # discovery has no event to wait on here; poll the match counts
-        sequence = self.send(request)
-        while (response := self.reply(sequence)) is None:
-            remaining = deadline - time.monotonic()
+        # Re-sent every _RESEND_S until answered: discovery is not symmetric in time, and a reply the
+        # server writes before its writer has matched this client's reader is lost. The services this
+        # client calls (rcl_interfaces parameters) are idempotent, so a second request is harmless.
+        sequences = [self.send(request)]
+        sent_at = time.monotonic()
+        while (response := next((r for r in map(self.reply, sequences) if r is not None), None)) is None:
+            now = time.monotonic()
+            remaining = deadline - now
             if remaining <= 0:
                 raise TimeoutError(f"service {self.service_name} did not answer within {timeout_s:g} s")
-            waitset.wait(duration(seconds=min(remaining, 1.0)))
+            if now - sent_at >= _RESEND_S:
+                sequences.append(self.send(request))
+                sent_at = now
+            waitset.wait(duration(seconds=min(remaining, _RESEND_S)))
+        for sequence in sequences:  # answers to the repeated requests that arrived meanwhile
+            self._replies.pop(sequence, None)
         return response
