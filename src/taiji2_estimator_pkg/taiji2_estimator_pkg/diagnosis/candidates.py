@@ -76,9 +76,6 @@ FAMILIES = ("scale_factor_drift", "cross_coupling", "time_offset", "star_tracker
 TIMING_FAMILIES = ("time_offset", "actuation_delay", "thruster_response", "grs_time_offset")
 """Families that are timing conventions (stamps, latency, thrust response), not physics."""
 
-LAG_DEPENDENT_FAMILIES = ("actuation_delay", "grs_time_offset")
-"""Timing families whose signature depends on the thruster lag (:class:`CandidateContext`)."""
-
 DELAY_RANGE_S = TIMING_REACH_S
 """Timing candidates are scanned over +-0.5 s around the model's delay (and 0 .. 1 s of lag)."""
 
@@ -100,13 +97,6 @@ class CandidateContext:
         Suspension of the tm_stiffness candidate.
     t_mid_s : float
         Reference time of the drifts [s] (middle of the full record).
-    actuation_lag_extra_s : float
-        Thruster time constant beyond the model's [s] at which the delay-type signatures
-        (``actuation_delay``, ``grs_time_offset``) are evaluated: the fitted ``thruster_response``
-        when both are in the model. Delay and lag do not add linearly (the applied torque is the
-        command delayed by D and low-passed by T); with the delay's signature taken at the fitted lag,
-        ``[a(D0+tau, T0+lam) - a(D0, T0+lam)] + [a(D0, T0+lam) - a(D0, T0)]`` telescopes to the exact
-        joint change ``a(D0+tau, T0+lam) - a(D0, T0)`` at the fitted pair.
     """
 
     lin: Linearization
@@ -116,7 +106,6 @@ class CandidateContext:
     suspension_hz: float
     damping: float
     t_mid_s: float
-    actuation_lag_extra_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -486,16 +475,6 @@ def _actuation_change(ctx: CandidateContext, delay_s: float, time_constant_s: fl
     return _torque_column(ctx, moved - ctx.readouts.torque_cmd_n_m)
 
 
-def _delay_change(ctx: CandidateContext, extra_delay_s: float) -> np.ndarray:
-    """Torque-channel change (n, 15) of a command delay ``extra_delay_s`` beyond the model's, at the
-    thruster time constant the context carries (see :class:`CandidateContext`)."""
-    lag_s = max(ctx.model.time_constant_s + ctx.actuation_lag_extra_s, 0.0)
-    change = _actuation_change(ctx, ctx.model.delay_s + extra_delay_s, lag_s)
-    if lag_s != ctx.model.time_constant_s:
-        change = change - _actuation_change(ctx, ctx.model.delay_s, lag_s)
-    return change
-
-
 def _knot_candidate(name: str, param: str, knots: np.ndarray,
                     channels_at: Callable[[CandidateContext, float], np.ndarray],
                     inject: Callable[[np.ndarray, NominalModel], dict[str, Any]]) -> Candidate:
@@ -526,7 +505,7 @@ def _actuation_delay(model_delay_s: float, dt_s: float) -> Candidate:
                          math.ceil((model_delay_s + DELAY_RANGE_S) / (0.5 * dt_s)) + 1) * 0.5 * dt_s
 
     def channels_at(ctx: CandidateContext, tau: float) -> np.ndarray:
-        return _delay_change(ctx, tau)
+        return _actuation_change(ctx, ctx.model.delay_s + tau, ctx.model.time_constant_s)
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         return {"name": "actuation_delay", "delay_s": float(theta[0])}
@@ -540,7 +519,8 @@ def _grs_time_offset(model_delay_s: float, dt_s: float) -> Candidate:
 
     def channels_at(ctx: CandidateContext, delta: float) -> np.ndarray:
         # GRS stamped delta late = the physics delayed by delta, the star tracker read delta early
-        return _delay_change(ctx, delta) + perturbation_channels(ctx.lin, ctx.model, datt=delta * ctx.lin.omega)
+        torque = _actuation_change(ctx, ctx.model.delay_s + delta, ctx.model.time_constant_s)
+        return torque + perturbation_channels(ctx.lin, ctx.model, datt=delta * ctx.lin.omega)
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         return {"name": "grs_time_offset", "offset_s": float(theta[0])}

@@ -34,7 +34,7 @@ from scipy.stats import chi2 as chi2_dist
 
 from taiji2_sim_pkg.core.config import SimConfig
 
-from .candidates import LAG_DEPENDENT_FAMILIES, TIMING_FAMILIES, Candidate, NoiseCandidate, candidate_catalog
+from .candidates import TIMING_FAMILIES, Candidate, NoiseCandidate, candidate_catalog
 from .channels import CHANNELS
 from .evaluation import (
     accepted_report_data,
@@ -565,14 +565,15 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
         elif isinstance(best, Candidate):
             full.refine(best, current)  # second-order signatures: relinearise at the fitted magnitude
             current = current + best.column_names()
-            if best.is_timing:  # a delay and a lag together: their joint change, before the next step
-                _refine_series(full, accepted, current, joint_only=True)
         _, _, chi2_current = full.fit(current)
     result.steps = steps
     lap("selection")
 
     # final model and the remaining gap ---------------------------------------------------------
-    _refine_series(full, accepted, current)  # final magnitudes of the series signatures, every effect in
+    for candidate in accepted:  # the final magnitudes of second-order signatures, with every effect in
+        if isinstance(candidate, Candidate) and candidate.series is not None:
+            names = candidate.column_names()
+            full.refine(candidate, [name for name in current if name not in names])
     theta_final, cov_final, chi2_final = full.fit(current)
     say("scanning the residual with the accepted effects")
     result.calibration["readout_response_final"] = full.response(current, theta_final)[1].to_dict()
@@ -631,7 +632,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
         say(f"held-out check: fit on the first {split * model.dt_s:.0f} s, apply to the last "
             f"{(inp.n - split) * model.dt_s:.0f} s")
         _held_out(inp, split, model, g, d, settings, options, candidates, noise, accepted, noise_fit, reports, t_mid,
-                  floor[1], full.ctx.actuation_lag_extra_s)
+                  floor[1])
     lap("held_out")
     result.effects = reports
     _apply_naming_rule(result, reports, remaining)
@@ -653,37 +654,6 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     result.timing_s = timing
     say(f"done in {timing['total']:.1f} s: {summary}")
     return result
-
-
-#: Gauss-Seidel passes over a delay and a thruster lag fitted together, and the change of the lag [s]
-#: below which they have converged (far below its sigma, ~1e-3 s for 3 h)
-_JOINT_TIMING_PASSES = 8
-_JOINT_TIMING_TOLERANCE_S = 1e-7
-
-
-def _refine_series(full: Record, accepted: Sequence[Candidate | NoiseCandidate], current: Sequence[str], *,
-                   joint_only: bool = False) -> None:
-    """Refit every accepted series signature by its exact series with all the others in.
-
-    With ``thruster_response`` and a delay-type timing effect both accepted, passes alternate with
-    evaluating the delay's signature at the fitted lag (:meth:`Record.set_actuation_lag`) until the lag
-    settles: at that fixed point the two signatures add up to the exact joint change of the applied
-    torque. ``joint_only``: do nothing unless both are accepted."""
-    series = [c for c in accepted if isinstance(c, Candidate) and c.series is not None]
-    lag = next((c for c in series if c.name == "thruster_response"), None)
-    joint = lag is not None and any(c.name in LAG_DEPENDENT_FAMILIES for c in series)
-    if joint_only and not joint:
-        return
-    for _ in range(_JOINT_TIMING_PASSES):
-        for candidate in series:
-            names = candidate.column_names()
-            full.refine(candidate, [name for name in current if name not in names])
-        if not joint:
-            return
-        previous = full.ctx.actuation_lag_extra_s
-        full.set_actuation_lag(full.secant.get(lag.key, 0.0))
-        if abs(full.ctx.actuation_lag_extra_s - previous) <= _JOINT_TIMING_TOLERANCE_S:
-            return
 
 
 def _with_stamp_phases(model: NominalModel, inp: DiagnosisInput) -> NominalModel:
@@ -811,15 +781,12 @@ def _reports(full: Record, candidates: Sequence[Candidate], noise: NoiseCandidat
 def _held_out(inp: DiagnosisInput, split: int, model: NominalModel, g: np.ndarray, d: np.ndarray,
               settings: RecordSettings, options: DiagnosisOptions, candidates: Sequence[Candidate],
               noise: NoiseCandidate | None, accepted: Sequence[Candidate | NoiseCandidate],
-              noise_fit: dict[str, float], reports: list[EffectReport], t_mid: float, floor: float,
-              lag_extra_s: float) -> None:
+              noise_fit: dict[str, float], reports: list[EffectReport], t_mid: float, floor: float) -> None:
     """Fit every reported effect on the training part and apply it to the held-out part."""
     wanted = {r.key for r in reports}
     chosen = [c for c in candidates if c.key in wanted or c in accepted]
     train = Record(inp.slice(0, split), model, g, d, settings, chosen, t_mid)
     test = Record(inp.slice(split, inp.n), model, g, d, settings, chosen, t_mid)
-    for part in (train, test):  # the delay signatures at the lag fitted on the whole record
-        part.set_actuation_lag(lag_extra_s)
     accepted_det = [c for c in accepted if isinstance(c, Candidate)]
     edges, period, halfwidth = options.band_edges_hz, model.maneuver_period_s, options.harmonic_halfwidth
     base = list(train.nuisance) + [name for c in accepted_det for name in c.column_names()]

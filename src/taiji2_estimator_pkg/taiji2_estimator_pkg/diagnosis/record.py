@@ -5,14 +5,13 @@ Also the calibration of the nominal model (Gauss-Newton on the nuisance columns 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .candidates import LAG_DEPENDENT_FAMILIES, Candidate, CandidateContext
+from .candidates import Candidate, CandidateContext
 from .channels import Linearization, linearize, nuisance_column, nuisance_names, readouts_from_input
 from .dynamics import ResponseFit, fit_response
 from .inputs import DiagnosisInput
@@ -156,26 +155,6 @@ class Record:
         self.ffts[name] = sum(w * self.ffts[n] for w, n in zip(weights, names, strict=True))
         self.design.replace(self.whitener, name, self.ffts[name])
         self.secant[candidate.key] = value
-
-    def set_actuation_lag(self, extra_s: float) -> None:
-        """Evaluate the delay-type timing signatures at the thruster time constant ``T0 + extra_s``
-        (the fitted ``thruster_response``; see :class:`CandidateContext`): their columns, series and
-        secants are rebuilt; every other column stays."""
-        extra_s = float(extra_s)
-        if extra_s == self.ctx.actuation_lag_extra_s:
-            return
-        self.ctx = dataclasses.replace(self.ctx, actuation_lag_extra_s=extra_s)
-        for candidate in self.candidates.values():
-            if candidate.name not in LAG_DEPENDENT_FAMILIES:
-                continue
-            columns = dict(zip(candidate.column_names(), candidate.build(self.ctx), strict=True))
-            if candidate.series is not None and candidate.series_names()[0] in self.ffts:
-                columns.update(zip(candidate.series_names(), candidate.series(self.ctx), strict=True))
-            for name, column in columns.items():
-                self.ffts[name] = column_fft(column, self.k_max)
-                self.design.replace(self.whitener, name, self.ffts[name])
-            if candidate.key in self.secant:
-                self.relinearise(candidate, np.array([self.secant[candidate.key]]))
 
     @staticmethod
     def _secant_weights(candidate: Candidate, value: float) -> np.ndarray:
