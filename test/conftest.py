@@ -13,6 +13,19 @@ os.environ.setdefault("TAIJI2_RUNTIME", "cyclonedds")
 os.environ.setdefault("ROS_DOMAIN_ID", str(100 + os.getpid() % 100))
 
 
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Under real rclpy, tests of the embedded runtime's own internals are skipped with their reason."""
+    from taiji2_runtime.ros import RUNTIME
+
+    if RUNTIME != "rclpy":
+        return
+    for item in items:
+        marker = item.get_closest_marker("embedded_runtime")
+        if marker is not None:
+            reason = marker.kwargs.get("reason") or (marker.args[0] if marker.args else "embedded runtime only")
+            item.add_marker(pytest.mark.skip(reason=f"embedded runtime itself: {reason}"))
+
+
 @pytest.fixture
 def context() -> Iterator[object]:
     from taiji2_runtime.ros import rclpy

@@ -7,8 +7,10 @@ endpoints (that is how ``ros2 node info`` maps endpoints to nodes); the particip
 names its enclave; the topic's type hash is rosidl's. The rclpy tier checks ``ros2 node list``.
 """
 
+
 from __future__ import annotations
 
+import pytest
 from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsParticipant, BuiltinTopicDcpsPublication
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
@@ -19,6 +21,11 @@ from taiji2_runtime.dds_rclpy.discovery_info import DISCOVERY_TOPIC, discovery_t
 from taiji2_runtime.ros import messages, rclpy
 
 from support import spin_until
+
+pytestmark = pytest.mark.embedded_runtime(reason=(
+    "the embedded runtime's own ros_discovery_info writer and graph cache; under rclpy rmw_cyclonedds "
+    "writes it (test/rclpy checks ros2 node list/info on embedded nodes)"
+))
 
 #: rosidl's hash of rmw_dds_common/msg/ParticipantEntitiesInfo (ROS 2 Jazzy share/rmw_dds_common/msg/*.json)
 ROSIDL_PARTICIPANT_ENTITIES_INFO = "RIHS01_91a0593bacdcc50ea9bdcf849a938b128412cc1ea821245c663bcd26f83c295e"

@@ -10,6 +10,7 @@ from support import spin_until
 
 Node = rclpy.node.Node
 QoS = rclpy.qos
+Context = rclpy.context.Context
 
 
 def _wrench(z: float) -> object:
@@ -57,9 +58,7 @@ def test_best_effort_writer_does_not_match_reliable_reader(context, executor):
 
 
 def test_remapping_and_namespaces(context):
-    from taiji2_runtime.dds_rclpy.context import Context  # a context with its own arguments
-
-    ctx = Context()
+    ctx = Context()  # a context with its own arguments
     rclpy.init(args=["x", "--ros-args", "-r", "chatter:=/remapped", "-r", "__ns:=/ns1"], context=ctx)
     try:
         node = Node("n", context=ctx)
@@ -72,8 +71,6 @@ def test_remapping_and_namespaces(context):
 
 
 def _context_with(args: list[str]) -> object:
-    from taiji2_runtime.dds_rclpy.context import Context
-
     ctx = Context()
     rclpy.init(args=["x", "--ros-args", *args], context=ctx)
     return ctx
@@ -119,14 +116,18 @@ def test_parameter_type_and_range_are_enforced(context):
 
 
 def test_malformed_ros_args_raise_clear_errors():
-    from taiji2_runtime.dds_rclpy.context import Context
-
-    cases = ((["-p", "novalue"], "name:=value"), (["--bogus"], "unknown flag"), (["-p"], "expects a value"))
+    # rclpy raises rcl's argument errors from its C extension (RCLInvalidROSArgsError,
+    # UnknownROSArgsError); what both runtimes promise is an error naming the argument
+    cases = ((["-p", "novalue"], "novalue"), (["--bogus"], "--bogus"), (["-p"], "-p"))
     for args, pattern in cases:
-        with pytest.raises(rclpy.exceptions.InvalidRosArgumentsException, match=pattern):
-            Context().init(["x", "--ros-args", *args])
+        ctx = Context()
+        with pytest.raises(Exception, match=pattern):
+            rclpy.init(args=["x", "--ros-args", *args], context=ctx)
+        assert not ctx.ok()
 
 
+@pytest.mark.embedded_runtime(reason="ROS 2 allows two nodes of one name (rcl only warns); the embedded runtime "
+                              "refuses them (docs/runtime.md)")
 def test_two_nodes_with_the_same_name_are_refused(context):
     Node("same", context=context)
     with pytest.raises(rclpy.exceptions.NodeNameNonUniqueError, match="/same"):
@@ -134,8 +135,6 @@ def test_two_nodes_with_the_same_name_are_refused(context):
 
 
 def test_timer_on_simulated_time_follows_clock(context, executor):
-    from taiji2_runtime.dds_rclpy.context import Context
-
     sim_ctx = Context()
     rclpy.init(args=["x", "--ros-args", "-p", "use_sim_time:=true"], context=sim_ctx)
     sim_executor = rclpy.executors.SingleThreadedExecutor(context=sim_ctx)
@@ -179,7 +178,11 @@ def test_spin_until_future_complete_times_out_and_completes(context, executor):
 def test_shutdown_from_a_callback_ends_spin_with_external_shutdown(context, executor):
     node = Node("stopper", context=context)
     executor.add_node(node)
-    node.create_timer(0.05, lambda: context.shutdown("test"))
-    with pytest.raises(rclpy.executors.ExternalShutdownException):
+    node.create_timer(0.05, context.try_shutdown)
+    # rclpy's spin() returns once the context is no longer ok between callbacks, and raises
+    # ExternalShutdownException when the shutdown comes while it waits: either ends the spin
+    try:
         executor.spin()
+    except rclpy.executors.ExternalShutdownException:
+        pass
     assert not context.ok()

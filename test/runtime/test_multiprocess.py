@@ -76,6 +76,8 @@ def plain_reader():
     ctx.shutdown()
 
 
+@pytest.mark.embedded_runtime(reason="a plain Cyclone DDS reader in the embedded runtime's participant "
+                              "configuration; test/rclpy has the rclpy <-> embedded exchange")
 def test_plain_cyclone_subscriber_receives_the_square_wave_and_sees_shutdown(plain_reader):
     started = time.monotonic()
     proc = _start_commander()
@@ -182,6 +184,8 @@ def test_two_processes_with_the_embedded_runtime_exchange_messages_losslessly(tm
         rclpy.try_shutdown(context=ctx)
 
 
+@pytest.mark.embedded_runtime(reason="ROS 2 allows two nodes of one name (rcl only warns); the embedded runtime "
+                              "refuses them graph-wide (docs/runtime.md)")
 def test_a_second_node_with_the_same_name_in_another_process_exits_with_one_line():
     first = _start_commander()
     try:

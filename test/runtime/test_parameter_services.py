@@ -16,6 +16,11 @@ from taiji2_runtime.ros import rclpy
 
 from support import spin_until
 
+pytestmark = pytest.mark.embedded_runtime(reason=(
+    "the embedded runtime's own parameter services and service client; rcl provides them under rclpy "
+    "(test/rclpy calls ros2 param on embedded nodes and taiji2 param on rclpy nodes)"
+))
+
 
 @pytest.fixture
 def other_context():

@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+import pytest
+
 from taiji2_runtime.dds_rclpy.rosout import qos_profile_rosout_default
 from taiji2_runtime.ros import messages, rclpy
 
 from support import spin_until
+
+pytestmark = pytest.mark.embedded_runtime(reason=(
+    "the embedded runtime's own /rosout publisher; rcl's logging provides it under rclpy"
+))
 
 
 def test_node_log_lines_and_child_logger_lines_arrive_on_rosout(context, executor):
