@@ -116,12 +116,12 @@ def test_parameter_type_and_range_are_enforced(context):
 
 
 def test_malformed_ros_args_raise_clear_errors():
-    # rclpy raises rcl's argument errors from its C extension (RCLInvalidROSArgsError,
-    # UnknownROSArgsError); what both runtimes promise is an error naming the argument
+    # rclpy raises rcl's argument errors from its C extension (RCLError, UnknownROSArgsError: both
+    # RuntimeErrors), naming the argument
     cases = ((["-p", "novalue"], "novalue"), (["--bogus"], "--bogus"), (["-p"], "-p"))
     for args, pattern in cases:
         ctx = Context()
-        with pytest.raises(Exception, match=pattern):
+        with pytest.raises(RuntimeError, match=pattern):
             rclpy.init(args=["x", "--ros-args", *args], context=ctx)
         assert not ctx.ok()
 

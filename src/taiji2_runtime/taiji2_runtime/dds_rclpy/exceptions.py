@@ -58,10 +58,6 @@ class ROSInterruptException(Exception):
     """The context was shut down while an operation was waiting."""
 
 
-class InvalidRosArgumentsException(ValueError):
-    """``--ros-args`` could not be parsed."""
-
-
 class NodeNameNonUniqueError(RuntimeError):
     """A node with the same fully qualified name already exists in the graph."""
 
@@ -72,3 +68,8 @@ class DdsUnavailableError(RuntimeError):
 
 class RCLError(RuntimeError):
     """rcl reported an error (as ``rclpy._rclpy_pybind11.RCLError``)."""
+
+
+class InvalidRosArgumentsException(RCLError):
+    """``--ros-args`` could not be parsed (rclpy raises rcl's ``RCLError`` or ``UnknownROSArgsError``, both
+    RuntimeErrors, naming the argument)."""
