@@ -32,6 +32,9 @@ ESTIMATE_TOPICS = tuple(f"/taiji2/estimates/grs{g}/{k}" for g in (1, 2) for k in
 #: 600 s simulated: the c.m.-offset estimate is determined after a few minutes of the square wave
 #: (docs/estimators.md), and the run takes ~20 s of wall time on an idle core
 DURATION_S = 600.0
+#: what each node logs once it is up (an estimator: its method line; the recorder: its bag)
+_STARTED = {"maneuver_commander": "preset type1", "scale_factor_estimator": "method gls",
+            "com_offset_estimator": "method gls", "recorder": "recording into"}
 SEED = 4
 
 
@@ -113,6 +116,10 @@ class Graph:
         proc.send_signal(signal.SIGKILL)
         self.exit_codes.setdefault(name, []).append(proc.wait(timeout=10))
         self.spawn(name)
+
+    def wait_until_restarted(self, name: str, timeout_s: float = 60.0) -> None:
+        """Spin until the restarted ``name`` logged its start-up line a second time (it is up)."""
+        self.spin_until(lambda: self.log(name).count(_STARTED[name]) >= 2, timeout_s, f"{name} to start again")
 
     def stall(self, name: str, seconds: float) -> None:
         """SIGSTOP ``name`` for ``seconds`` of wall time, spinning the monitor meanwhile, then SIGCONT."""

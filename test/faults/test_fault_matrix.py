@@ -154,13 +154,14 @@ def test_each_node_killed_and_restarted(graph_context, tmp_path, reference):
     kills: dict[str, tuple[float, float]] = {}
     try:
         for k, victim in enumerate(VICTIMS):
-            graph.wait_for_progress(100.0 + 120.0 * k)  # the kills spread over the run
+            graph.wait_for_progress(60.0 + 100.0 * k)  # the kills spread over the run
             # every raw sample older than these estimates reached the recorder before it was killed, and
             # 2 s of wall time (4 journal periods) later it is in a closed journal file
             safe_s = graph.progress_s()
             graph.spin_for(2.0)
             kills[victim] = (safe_s, graph.progress_s())
             graph.kill_and_restart(victim)
+            graph.wait_until_restarted(victim)
         graph.wait_for_end()
         gaps = _assert_within_sigma(graph, reference)
         samples = _samples(graph)

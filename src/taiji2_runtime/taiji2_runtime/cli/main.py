@@ -93,8 +93,22 @@ def _report_error(where: str, exc: BaseException) -> None:
     report_error(where, exc)
 
 
+#: verbs that run until stopped (nodes, recorder, echo): SIGINT is how a user ends them
+_SERVICES = (("run",), ("bag", "record"), ("topic", "echo"))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        # Ctrl-C while the verb was still importing or starting, before its own SIGINT handling: a node or
+        # recorder that had not started has nothing to flush and stops as cleanly as a running one (0);
+        # a batch verb was cut short (130, the shell's code for SIGINT)
+        return 0 if any(tuple(argv[: len(s)]) == s for s in _SERVICES) else 130
+
+
+def _main(argv: list[str]) -> int:
     verb = argv[0] if argv else ""
     module_name = _module_of(verb) if verb and not verb.startswith("-") else None
     if module_name is None:
@@ -115,8 +129,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _verb_parser(verb, module).parse_args(argv)
     try:
         return int(args._module.main(args) or 0)
-    except KeyboardInterrupt:
-        return 130
     except (ValueError, LookupError, OSError, RuntimeError) as exc:
         _report_error(f"{_PROG} {args.verb}", exc)
         return 2

@@ -38,6 +38,9 @@ DEFAULT_CYCLONEDDS_CONFIG = f"""<CycloneDDS><Domain Id="any">
     <MaxAutoParticipantIndex>{MAX_PARTICIPANTS_PER_HOST}</MaxAutoParticipantIndex>
     <Peers><Peer address="127.0.0.1"/></Peers>
   </Discovery>
+  <Internal>
+    <Watermarks><WhcHigh>32kB</WhcHigh></Watermarks>
+  </Internal>
 </Domain></CycloneDDS>"""
 
 _ALIVE = 16  # DDS_IST_ALIVE

@@ -32,7 +32,6 @@ from taiji2_sim_pkg.core.command_gate import CommandGate, CommandSchedule
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.range_check import RangeMonitor
 from taiji2_sim_pkg.core.simulator import SimSample, Simulator
-from taiji2_sim_pkg.nodes.ack_window import AckWindow
 
 COMMAND_TOPIC = "/taiji2/maneuver/command"
 STAR_TRACKER_TOPIC = "/taiji2/star_tracker"
@@ -114,13 +113,6 @@ class SpacecraftSim(rclpy.node.Node):
             "accelerated: when a subscriber counted by wait_for_subscribers goes away (killed, restarting), "
             "hold the run this long for it to come back, then go on without it [s]",
             float_range=(0.0, 86400.0))).value
-        ack_window_s = dp("ack_window_s", 10.0, _descriptor(
-            "accelerated: every this much simulated time, wait until every reliable subscriber of the raw "
-            "topics has acknowledged all samples (a killed one holds the run until DDS drops it); 0: never [s]",
-            float_range=(0.0, 1e7))).value
-        ack_timeout_s = dp("ack_timeout_s", 30.0, _descriptor(
-            "accelerated: give up such a wait after this much wall time (a live subscriber that does not "
-            "acknowledge) [s]", float_range=(0.0, 86400.0))).value
         self._exit_when_done = dp("exit_when_done", True, _descriptor("shut down after duration_s")).value
         self._publish_truth = dp("publish_truth", True, _descriptor("publish ground truth under /taiji2/sim/")).value
         self._linger_s = dp("linger_s", 1.0, _descriptor(
@@ -156,8 +148,6 @@ class SpacecraftSim(rclpy.node.Node):
         self._clock_pub = (self.create_publisher(m.rosgraph_msgs.Clock, "/clock", 10)
                            if self._mode == "accelerated" else None)
         self._truth = _TruthPublishers(self, reliable_all) if self._publish_truth else None
-        self._acks = AckWindow([self._star_pub, *self._grs_pubs], round(ack_window_s * _NS), ack_timeout_s)
-        self._reported_ack_given_up = 0
         latched = rclpy.qos.QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
         self._provenance_pub = self.create_publisher(m.std_msgs.String, "/taiji2/sim/provenance", latched)
         self._provenance_pub.publish(m.std_msgs.String(data=json.dumps(self._sim.provenance())))
@@ -278,7 +268,7 @@ class SpacecraftSim(rclpy.node.Node):
             if self._sync:
                 self._step_while_commanded()  # a command may have arrived before the start
             return
-        if self._subscribers_missing() or not self._acks.open(self._time_ns()):
+        if self._subscribers_missing():
             self._waiting_since = time.monotonic()  # not the commander's fault
             return
         if not self._sync:
@@ -305,8 +295,7 @@ class SpacecraftSim(rclpy.node.Node):
     def _step_while_commanded(self) -> None:
         # every step whose command is already known is simulated in one vectorised call (identical
         # to stepping one by one); /clock then jumps to the end of the chunk
-        while (self._started and not self._done and not self._subscribers_missing()
-               and self._acks.open(self._time_ns())):
+        while self._started and not self._done and not self._subscribers_missing():
             steps = min(self._schedule.covered_steps(self._time_ns(), self._dt_ns), _MAX_CHUNK_STEPS,
                         self._n_steps - self._sim.step_index)
             if steps <= 0:
@@ -418,18 +407,12 @@ class SpacecraftSim(rclpy.node.Node):
                             f"{self._command_timeout_s} s without one")
         if dropped:
             problems.append(f"{dropped} samples given up for a stalled reliable subscriber")
-        ack_given_up = self._acks.given_up - self._reported_ack_given_up
-        self._reported_ack_given_up = self._acks.given_up
-        if ack_given_up:
-            problems.append(f"a reliable subscriber did not acknowledge within {self._acks.timeout_s:g} s: "
-                            "run went on without waiting for it")
         if self._time_base_mismatches:
             problems.append(f"{self._time_base_mismatches} commands on another time base")
         status = d.DiagnosticStatus(name="spacecraft_sim: data flow", hardware_id="taiji2_sim",
                                     message="; ".join(problems) or "nominal")
         status.level = d.DiagnosticStatus.WARN if problems else d.DiagnosticStatus.OK
         values = {"paused_s": paused_s, "held_for_subscribers_s": held_s, "late_commands": self._late_commands,
-                  "held_for_acknowledgements_s": self._acks.held_s, "ack_waits_given_up": self._acks.given_up,
                   "publisher_samples_dropped": dropped,
                   "time_base_mismatches": self._time_base_mismatches}
         status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in values.items()]
