@@ -4,19 +4,34 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 # The embedded runtime is what these tests exercise, also on a machine where rclpy imports.
 os.environ.setdefault("TAIJI2_RUNTIME", "cyclonedds")
-# A private DDS domain per test session keeps parallel sessions on one host apart.
+# A private DDS domain per test session keeps parallel sessions on one host apart; the xdist workers
+# of one session (gw0, gw1, ...) inherit it and each moves to a domain of its own.
 os.environ.setdefault("ROS_DOMAIN_ID", str(100 + os.getpid() % 100))
+if os.environ.get("PYTEST_XDIST_WORKER", "").startswith("gw"):
+    os.environ["ROS_DOMAIN_ID"] = str(int(os.environ["ROS_DOMAIN_ID"]) + 1 + int(os.environ["PYTEST_XDIST_WORKER"][2:]))
+
+
+#: test folders whose tests run node graphs in subprocesses and bound waits in wall time: one xdist
+#: group, so they run one after another on one worker (never two graphs at once)
+GRAPH_FOLDERS = ("faults", "nodes", "bag", "runtime", "rclpy")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Under real rclpy, tests of the embedded runtime's own internals are skipped with their reason."""
+    """xdist groups (the graph tests together, every other module on one worker, so module fixtures are
+    made once); under real rclpy, tests of the embedded runtime's own internals skip with their reason."""
     from taiji2_runtime.ros import RUNTIME
 
+    root = Path(__file__).parent
+    for item in items:
+        parts = item.path.relative_to(root).parts if item.path.is_relative_to(root) else (item.path.name,)
+        group = "graph" if parts[0] in GRAPH_FOLDERS else "/".join(parts)
+        item.add_marker(pytest.mark.xdist_group(group))
     if RUNTIME != "rclpy":
         return
     for item in items:

@@ -195,6 +195,6 @@ def test_every_taiji2_message_type_crosses_between_rclpy_and_embedded_both_ways(
 def test_runtime_and_node_suites_pass_under_real_rclpy(ros):
     # the runtime and node tests again, now with rclpy and the colcon-built messages; tests of the
     # embedded runtime's own internals skip themselves with their reason (test/conftest.py)
-    out = ros(f"cd {REPO} && TAIJI2_RUNTIME=rclpy python3 -m pytest -q -p no:cacheprovider -rs test/runtime test/nodes",
-              timeout=900)
+    out = ros(f"cd {REPO} && TAIJI2_RUNTIME=rclpy python3 -m pytest -q -p no:cacheprovider -n 0 -rs "
+              "test/runtime test/nodes", timeout=900)
     assert out.returncode == 0, out.stdout[-6000:] + out.stderr[-2000:]
