@@ -24,14 +24,27 @@ def test_colcon_build_installs_every_node(ros):
     assert set(out.stdout.strip().splitlines()) == ALL_EXECUTABLES
 
 
-def test_readme_ros2_section_commander_and_topic_echo(ros):
-    commander = ros("exec ros2 run taiji2_sim_pkg maneuver_commander", background=True)
+def test_readme_ros2_section_verbatim_with_the_estimators_all_stop_with_exit_0(ros):
+    # the README's two commands (the simulator in the background, the commander on simulated time), plus
+    # the two estimators, all under `ros2 run`: estimates flow, and every node stops on SIGINT with exit 0
+    nodes = {"spacecraft_sim": "ros2 run taiji2_sim_pkg spacecraft_sim",
+             "scale_factor_estimator": "ros2 run taiji2_estimator_pkg scale_factor_estimator",
+             "com_offset_estimator": "ros2 run taiji2_estimator_pkg com_offset_estimator",
+             "maneuver_commander": "ros2 run taiji2_sim_pkg maneuver_commander --ros-args -p use_sim_time:=true "
+                                   "-p lookahead_s:=2.0"}
+    procs = {name: ros(f"exec {command}", background=True) for name, command in nodes.items()}
     try:
-        echo = ros("ros2 topic echo --once /taiji2/maneuver/command", timeout=120)
+        command = ros("ros2 topic echo --once /taiji2/maneuver/command", timeout=120)
+        scale = ros("ros2 topic echo --once /taiji2/estimates/grs1/scale_factors", timeout=180)
+        offset = ros("ros2 topic echo --once /taiji2/estimates/grs2/com_offset", timeout=180)
     finally:
-        status, err = _stop(commander)
-    assert echo.returncode == 0 and "torque:" in echo.stdout and "frame_id: crf" in echo.stdout, echo.stderr
-    assert status == 0 and "error" not in err.lower(), err
+        stopped = {name: _stop(proc) for name, proc in procs.items()}
+    assert command.returncode == 0 and "torque:" in command.stdout and "frame_id: crf" in command.stdout, command.stderr
+    assert scale.returncode == 0 and "scale_factors:" in scale.stdout, scale.stderr
+    assert offset.returncode == 0 and "offset:" in offset.stdout, offset.stderr
+    for name, (status, err) in stopped.items():
+        errors = [line for line in err.splitlines() if line.startswith("error") or "Traceback" in line]
+        assert status == 0 and errors == [], (name, status, err[-2000:])
 
 
 def test_spacecraft_sim_runs_to_its_end_with_exit_0(ros):
