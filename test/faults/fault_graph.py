@@ -19,7 +19,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rosbags.rosbag2 import Reader
 
+from taiji2_runtime.interfaces import typestore
 from taiji2_runtime.ros import messages, rclpy
 
 from support import PYTHON, python_subprocess_env
@@ -36,6 +38,18 @@ DURATION_S = 600.0
 _STARTED = {"maneuver_commander": "preset type1", "scale_factor_estimator": "method gls",
             "com_offset_estimator": "method gls", "recorder": "recording into"}
 SEED = 4
+
+
+def bag_stamps(bag: Path) -> dict[str, list[int]]:
+    """Header stamps [ns] of the raw topics in ``bag`` (the files its metadata lists), per topic, in bag order."""
+    store = typestore()
+    out: dict[str, list[int]] = {t: [] for t in RAW_TOPICS}
+    with Reader(bag) as reader:
+        for connection, _, data in reader.messages():
+            if connection.topic in out:
+                h = store.deserialize_cdr(data, connection.msgtype).header
+                out[connection.topic].append(h.stamp.sec * _NS + h.stamp.nanosec)
+    return out
 
 
 @dataclass
@@ -181,6 +195,27 @@ class Graph:
 
     def wait_for_end(self, timeout_s: float = 120.0) -> None:
         self.wait_for_progress(self.duration_s, timeout_s)
+
+    def wait_for_bag(self, bag: Path, t_s: float, timeout_s: float = 60.0) -> dict[str, list[int]]:
+        """Spin until the live ``bag`` lists every raw topic up to ``t_s`` [s]; its raw stamps then.
+
+        The bag is read as any reader would while it is being recorded: a reading that races the
+        writer's move of a file (a journal deleted once its segment closed) is simply repeated."""
+        listed: dict[str, list[int]] = {}
+
+        def reached() -> bool:
+            nonlocal listed
+            try:
+                listed = bag_stamps(bag)
+            except Exception:  # metadata replaced between reading it and opening a file it listed
+                return False
+            return all(s and s[-1] >= t_s * _NS for s in listed.values())
+
+        deadline = time.monotonic() + timeout_s
+        while not reached():
+            assert time.monotonic() < deadline, f"timed out after {timeout_s} s waiting for {bag} to reach {t_s} s"
+            self.spin_for(0.5)
+        return listed
 
     def named(self, *words: str) -> list[Diagnostic]:
         """Non-OK /diagnostics statuses whose message contains every one of ``words``."""
