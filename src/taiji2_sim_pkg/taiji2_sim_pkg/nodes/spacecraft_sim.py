@@ -207,6 +207,8 @@ class SpacecraftSim(rclpy.node.Node):
         return self._sim.step_index * self._dt_ns
 
     def _step_once(self, stamp_offset_ns: int = 0) -> None:
+        if self._sim.step_index >= self._n_steps:  # never a sample past the end of the run
+            return
         if self._mode == "realtime":
             torque = self._gate.torque_n_m  # wall-clock commanding: the latest valid command
         else:
@@ -279,6 +281,8 @@ class SpacecraftSim(rclpy.node.Node):
                 self._publish_clock()
             return
         self._step_while_commanded()  # after a hold: the commands that arrived meanwhile
+        if self._done:  # that reached the end (whose wait for acknowledgements may outlast the timeout)
+            return
         if time.monotonic() - self._waiting_since > self._command_timeout_s:
             self._late_commands += 1
             self.get_logger().warn(
