@@ -22,6 +22,7 @@ if os.environ.get("PYTEST_XDIST_WORKER", "").startswith("gw"):
 GRAPH_FOLDERS = ("faults", "nodes", "bag", "runtime", "rclpy")
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook, which reads xdist_group into the node ids
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """xdist groups (the graph tests together, every other module on one worker, so module fixtures are
     made once); under real rclpy, tests of the embedded runtime's own internals skip with their reason."""

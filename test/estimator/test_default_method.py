@@ -13,6 +13,8 @@ sampling distributions (deterministic for the fixed seeds; a real inconsistency 
   the bound within [0.95, 1.1] (the GLS covariance is the Fisher information of the data).
 """
 
+import functools
+
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -35,7 +37,14 @@ P_TAIL = 5e-4  # each side of the 99.9 % bands
 
 @pytest.fixture(scope="module", params=sorted(CASES))
 def monte_carlo(request):
-    layout, overrides = CASES[request.param]
+    return request.param, _monte_carlo(request.param)
+
+
+@functools.cache
+def _monte_carlo(case: str) -> dict:
+    """Errors, covariances and bound per quantity: once per case and process, whatever order the tests run in
+    (a module fixture is made again each time the case changes between consecutive tests)."""
+    layout, overrides = CASES[case]
     rows = []
     for seed in range(SEEDS):
         config, out = simulate(layout, 3600.0, 100 + seed, **overrides)
@@ -52,9 +61,8 @@ def monte_carlo(request):
     bound = crlb_for_layout(layout, 3600.0, overrides=sim_overrides)
     bounds = {"G": bound.scale_factor_relative_sigma, "d": bound.com_offset_sigma,
               "d1-d2": bound.difference_sigma()}
-    stats = {name: (np.array([r[name][0] for r in rows]), np.array([r[name][1] for r in rows]), bounds[name])
-             for name in ("G", "d", "d1-d2")}
-    return request.param, stats
+    return {name: (np.array([r[name][0] for r in rows]), np.array([r[name][1] for r in rows]), bounds[name])
+            for name in ("G", "d", "d1-d2")}
 
 
 @pytest.mark.slow
