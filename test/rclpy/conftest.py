@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import site
 import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -59,7 +60,9 @@ def ros(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., subprocess.Co
         pytest.skip(f"no ROS 2 environment script at {ROS_ENV}")
     ws = tmp_path_factory.mktemp("ws")
     domain = str(_domain_without_daemon())
-    packages = ":".join(site.getsitepackages())
+    # every site directory of this interpreter, including those a .pth file adds (.ci/run's .venv-ros
+    # reaches the README's .venv that way), since PYTHONPATH entries do not process .pth files
+    packages = ":".join(dict.fromkeys([*site.getsitepackages(), *(p for p in sys.path if p.endswith("-packages"))]))
     # Debian's python3 first: ROS 2 and rosidl's code generators run on it
     prefix = (f"export PATH=/usr/bin:$PATH ROS_DOMAIN_ID={domain} && source {ROS_ENV} >/dev/null && "
               f"export PYTHONPATH=${{PYTHONPATH:+$PYTHONPATH:}}{packages}")
