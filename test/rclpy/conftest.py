@@ -9,7 +9,6 @@ with this interpreter's site-packages appended so scipy/PyYAML/cyclonedds resolv
 from __future__ import annotations
 
 import os
-import site
 import subprocess
 import sys
 from collections.abc import Callable
@@ -62,7 +61,7 @@ def ros(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., subprocess.Co
     domain = str(_domain_without_daemon())
     # every site directory of this interpreter, including those a .pth file adds (.ci/run's .venv-ros
     # reaches the README's .venv that way), since PYTHONPATH entries do not process .pth files
-    packages = ":".join(dict.fromkeys([*site.getsitepackages(), *(p for p in sys.path if p.endswith("-packages"))]))
+    packages = ":".join(p for p in sys.path if p.endswith("-packages"))  # in this interpreter's order
     # Debian's python3 first: ROS 2 and rosidl's code generators run on it
     prefix = (f"export PATH=/usr/bin:$PATH ROS_DOMAIN_ID={domain} && source {ROS_ENV} >/dev/null && "
               f"export PYTHONPATH=${{PYTHONPATH:+$PYTHONPATH:}}{packages}")
