@@ -51,10 +51,12 @@ def test_readme_ros2_section_verbatim_with_the_estimators_all_stop_with_exit_0(r
              "maneuver_commander": "ros2 run taiji2_sim_pkg maneuver_commander --ros-args -p use_sim_time:=true "
                                    "-p lookahead_s:=2.0"}
     procs = {name: ros(f"exec {command}", background=True) for name, command in nodes.items()}
-    try:
-        command = ros("ros2 topic echo --once /taiji2/maneuver/command", timeout=120)
-        scale = ros("ros2 topic echo --once /taiji2/estimates/grs1/scale_factors", timeout=180)
-        offset = ros("ros2 topic echo --once /taiji2/estimates/grs2/com_offset", timeout=180)
+    try:  # with the type given, `ros2 topic echo` waits for the topic instead of failing while nodes start
+        command = ros("ros2 topic echo --once /taiji2/maneuver/command geometry_msgs/msg/WrenchStamped", timeout=120)
+        scale = ros("ros2 topic echo --once /taiji2/estimates/grs1/scale_factors taiji2_msgs/msg/ScaleFactorEstimate",
+                    timeout=180)
+        offset = ros("ros2 topic echo --once /taiji2/estimates/grs2/com_offset taiji2_msgs/msg/ComOffsetEstimate",
+                     timeout=180)
     finally:
         stopped = {name: _stop(proc) for name, proc in procs.items()}
     assert command.returncode == 0 and "torque:" in command.stdout and "frame_id: crf" in command.stdout, command.stderr
