@@ -35,9 +35,9 @@ ESTIMATE_TOPICS = tuple(f"/taiji2/estimates/grs{g}/{k}" for g in (1, 2) for k in
 #: 600 s simulated: the c.m.-offset estimate is determined after a few minutes of the square wave
 #: (docs/estimators.md), and the run takes ~20 s of wall time on an idle core
 DURATION_S = 600.0
-#: what each node logs once it is up (an estimator: its method line; the recorder: its bag)
-_STARTED = {"maneuver_commander": "preset type1", "scale_factor_estimator": "method gls",
-            "com_offset_estimator": "method gls", "recorder": "recording into"}
+#: what each node logs once it is up (simulator: its run line; estimator: its method line; recorder: its bag)
+_STARTED = {"spacecraft_sim": "layout type1, seed", "maneuver_commander": "preset type1",
+            "scale_factor_estimator": "method gls", "com_offset_estimator": "method gls", "recorder": "recording into"}
 SEED = 4
 
 

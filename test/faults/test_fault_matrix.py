@@ -129,9 +129,11 @@ def test_each_node_stopped_for_5_s_then_continued(graph_context, tmp_path, refer
         assert stamps[topic] == expected, f"{topic}: {len(stamps[topic])} of {len(expected)} samples in the bag"
 
 
-#: killed in turn, one graph (bounded CI time); the simulator is not (a restarted one starts at t = 0). The
-#: recorder first: its restart must find most of the run still to record, however far it trailed the graph
-VICTIMS = ["recorder", *(n for n in NODES if n not in ("spacecraft_sim", "recorder"))]
+#: killed in turn, one graph (bounded CI time). The recorder first: its restart must find most of the run
+#: still to record, however far it trailed the graph. The simulator last: a restarted one runs its seed again
+#: from t = 0 (the same data), the commander follows its clock back, and the estimators take up the rerun
+#: where their own data ended
+VICTIMS = ["recorder", "maneuver_commander", "scale_factor_estimator", "com_offset_estimator", "spacecraft_sim"]
 
 
 def test_each_node_killed_and_restarted(graph_context, tmp_path, reference):
@@ -162,6 +164,12 @@ def test_each_node_killed_and_restarted(graph_context, tmp_path, reference):
                 resumed = [d for d in graph.named("resumed from checkpoint") if d.name == victim]
                 assert resumed, (victim, [d.message for d in graph.diagnostics if d.level > 0][:20])
                 lost_s = max(d.values.get("data_gap_s", 0.0) for d in resumed)
+            if victim == "spacecraft_sim":
+                # the rerun's stamps up to what each estimator had are refused as out of order, counted and
+                # named; the commander commands again from the restarted clock
+                repeats = graph.named("rejected input", "out_of_order_stamp")
+                assert {d.name for d in repeats} >= set(ESTIMATORS), [d.message for d in graph.diagnostics][-20:]
+                assert "clock went back" in graph.log("maneuver_commander"), graph.root
             _report("SIGKILL + restart", victim, killed_at_s=killed_at_s, samples=samples, lost_s=lost_s,
                     max_gap_over_bound=max(gaps.values()))
     finally:

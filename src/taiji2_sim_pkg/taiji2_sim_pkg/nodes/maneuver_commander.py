@@ -114,6 +114,12 @@ class ManeuverCommander(rclpy.node.Node):
             self._origin_ns = now_ns
         if self._next_stamp_ns is None or self._lookahead_ns == 0:
             self._next_stamp_ns = now_ns
+        elif now_ns < self._next_stamp_ns - self._lookahead_ns - 2 * self._period_ns:
+            # the clock went back (a restarted simulation, a replay from its start): what was commanded
+            # beyond it is stale for the new run, so command again from the clock
+            self.get_logger().info(f"clock went back from {(self._next_stamp_ns - self._lookahead_ns) / 1e9:.1f} s "
+                                   f"to {now_ns / 1e9:.1f} s: commanding again from there")
+            self._next_stamp_ns = now_ns
         # every tick up to now + lookahead, in stamp order (time-tagged commands)
         while self._next_stamp_ns <= now_ns + self._lookahead_ns:
             self._publish_command(self._next_stamp_ns)
