@@ -46,8 +46,11 @@ def _filled(name: str) -> object:
 
 
 def _qos() -> object:
+    # transient-local: a pong written before the driver's reader matched the echo's writer (the graph
+    # already lists the writer, DDS has not matched it yet) is still delivered
     return rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL,
-                                reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
+                                reliability=rclpy.qos.ReliabilityPolicy.RELIABLE,
+                                durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def echo(node: object) -> None:
