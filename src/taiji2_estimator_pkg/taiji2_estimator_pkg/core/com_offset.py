@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike
 
 from .attitude import SmoothingDerivative
 from .estimate_blocks import PerGrsBlocks
+from .factored_steady import RegressorFactors
 from .instrument import LINEAR_FROM_ANGULAR, InstrumentModel, angular_differences, linear_scale_factors, linear_sums
 from .kalman import KalmanFilter, chi2_gate
 from .scale_factor import ScaleFactorEstimate, ScaleFactorModel, _EpochArrays
@@ -343,6 +344,58 @@ class ComOffsetModel:
                 for k in range(n_grs):
                     out[:, 3 * k:3 * k + 3, cols.start + 3 * k:cols.start + 3 * k + 3] = block
         return out
+
+    def basis_factors(self, sums: np.ndarray, diffs: np.ndarray, omega: np.ndarray,
+                      tau: np.ndarray) -> RegressorFactors:
+        """The :meth:`basis` of L epochs with every GRS present, as scalar series times patterns.
+
+        Every basis column is a scalar series times a constant vector: the voltage sums (data
+        bases), the products ``omega_a omega_b`` (``[omega x]^2 = omega omega^T - |omega|^2 I``),
+        1 and tau (nuisance), the voltage differences (``omega_dot^(ij) = W_i C_i^T e_j u_ij``).
+        20 series for two GRS instead of 60 dense columns per measurement row.
+        """
+        length = sums.shape[0]
+        n_grs, m = self.n_grs, self.m
+        series: list[np.ndarray] = []
+        patterns: list[np.ndarray] = []
+
+        def add(values: np.ndarray) -> np.ndarray:
+            series.append(np.broadcast_to(values, (length,)))
+            patterns.append(np.zeros((m, self.n_columns)))
+            return patterns[-1]
+
+        for i, g in enumerate(self.grs_ids):
+            c_t = self.c[g].T
+            for j in range(3):
+                axis = _LINEAR_AXIS_OF_ANGULAR[j]
+                add(sums[:, i, axis])[3 * i:3 * i + 3, 3 * i + j] = self.ratio * c_t[:, axis]
+        base = self.n_g
+        eye = np.eye(3)
+        for a in range(3):
+            for b in range(a, 3):
+                block = eye[a][:, None] * eye[b][None, :]
+                block = block - eye if a == b else block + block.T
+                pattern = add(omega[:, a] * omega[:, b])
+                for i in range(n_grs):
+                    pattern[3 * i:3 * i + 3, base + 3 * i:base + 3 * i + 3] = block
+        col = base + self.n_d
+        if self.options.detrend in ("linear", "constant"):
+            pattern = add(np.ones(length))
+            pattern[np.arange(m), col + np.arange(m)] = 1.0
+            col += m
+        if self.options.detrend == "linear":
+            pattern = add(tau)
+            pattern[np.arange(m), col + np.arange(m)] = 1.0
+            col += m
+        for i, g in enumerate(self.grs_ids):
+            mapping = self.angular.weights[g] @ self.c[g].T
+            for j in range(3):
+                block = cross_matrix(mapping[:, j])
+                pattern = add(diffs[:, i, j])
+                cols = self.col_xj[3 * i + j]
+                for k in range(n_grs):
+                    pattern[3 * k:3 * k + 3, cols.start + 3 * k:cols.start + 3 * k + 3] = block
+        return RegressorFactors(np.column_stack(series), np.stack(patterns))
 
     def residual(self, sums: np.ndarray, diffs: np.ndarray, omega: np.ndarray, tau: np.ndarray, g: np.ndarray,
                  beta: np.ndarray, present: np.ndarray | None = None) -> np.ndarray:
@@ -781,12 +834,12 @@ class ComOffsetEstimator:
             if full[k]:  # a run of regular epochs (run_regular also takes the transient after an irregular one)
                 stop = int(run_end[k])
                 start = k
-                chunk = 8192
+                chunk = 32768
                 while start < stop:
                     end = min(start + chunk, stop)
                     if theta is None:
-                        basis = model.basis(epochs.sums[start:end], epochs.diffs[start:end], omega[start:end],
-                                            tau[start:end])
+                        basis = model.basis_factors(epochs.sums[start:end], epochs.diffs[start:end],
+                                                    omega[start:end], tau[start:end])
                         self.filter.run_regular(np.zeros((end - start, model.m)), basis)
                         self.eiv_sum += (end - start) * self.eiv_full
                         self.n_eiv += end - start

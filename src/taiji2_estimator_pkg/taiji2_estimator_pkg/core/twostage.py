@@ -42,6 +42,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from taiji2_estimator_pkg.core.factored_steady import RegressorFactors, run_steady_factored
+from taiji2_estimator_pkg.core.first_order import first_order_recursion
+
 __all__ = [
     "RegularRunOutput",
     "StateSpaceModel",
@@ -90,97 +93,11 @@ def _affine_recursion(transition: np.ndarray, drive: np.ndarray, initial: np.nda
     return out.reshape(n_blocks * block, *drive.shape[1:])[:steps]
 
 
-def _rows(array: np.ndarray | None, start: int, stop: int) -> np.ndarray | None:
+def _rows(array: np.ndarray | RegressorFactors | None, start: int, stop: int) -> np.ndarray | None:
+    """Samples start..stop-1 (dense: the per-sample paths take (L, m, p) regressors)."""
+    if isinstance(array, RegressorFactors):
+        return array.rows(start, stop).dense()
     return None if array is None else array[start:stop]
-#: largest |lambda|^-j inside one block of :func:`first_order_recursion` (bounds the rounding growth)
-_BLOCK_GROWTH = 100.0
-
-
-def _doubling_recursion(mu: complex, drive: np.ndarray) -> np.ndarray:
-    """``y_k = mu y_{k-1} + x_k`` (``y_-1 = 0``) by recursive doubling (log2 passes; |mu| small)."""
-    y = drive.copy()
-    shift, power = 1, mu
-    # after the pass with shift s, y_k = sum_{i < 2s} mu^i x_{k-i}: stop once mu^s is below rounding
-    while shift < y.shape[0] and abs(power) > 1e-18:
-        y[shift:] = y[shift:] + power * y[:-shift]
-        shift, power = 2 * shift, power * power
-    return y
-
-
-def _block_scales(lam: complex, block: int) -> tuple[np.ndarray, np.ndarray]:
-    """``lam^-j`` and ``lam^(j+1)`` for j = 0..block-1 (cached: a filter has few modes)."""
-    key = (complex(lam), block)
-    cached = _SCALES.get(key)
-    if cached is None:
-        powers = np.arange(block, dtype=np.float64)
-        cached = (lam ** -powers, lam ** (powers + 1.0))
-        if len(_SCALES) > 64:
-            _SCALES.clear()
-        _SCALES[key] = cached
-    return cached
-
-
-_SCALES: dict[tuple[complex, int], tuple[np.ndarray, np.ndarray]] = {}
-
-
-def first_order_recursion(lam: complex, drive: np.ndarray, initial: np.ndarray,
-                          out: np.ndarray | None = None) -> np.ndarray:
-    """``y_k = lam y_{k-1} + x_k`` for k = 0..L-1 with ``y_-1 = initial``, in bulk.
-
-    The same as ``scipy.signal.lfilter([1], [1, -lam], x, axis=0, zi=lam * initial)``, evaluated
-    without a Python loop over samples: the record is cut into blocks of B samples with
-    ``|lam|^-B <= 100``; inside a block ``y_{s+j} = lam^(j+1) (y_{s-1} + sum_{i<=j} lam^-(i+1) x_{s+i})``
-    (a scaled cumulative sum), and the values carried from block to block obey the same recursion
-    with ``lam^B`` (small), solved by recursive doubling. Rounding grows by at most ~100 eps.
-
-    Parameters
-    ----------
-    lam : complex or float
-        Pole, ``|lam| <= 1``.
-    drive : numpy.ndarray
-        (L, ...) input x.
-    initial : numpy.ndarray
-        (...) state before the first sample.
-    out : numpy.ndarray, optional
-        (L, ...) array to write y into.
-
-    Returns
-    -------
-    numpy.ndarray
-        (L, ...) y, complex if ``lam`` or the input is.
-    """
-    length = drive.shape[0]
-    dtype = np.result_type(drive.dtype, np.asarray(initial).dtype, type(lam))
-    if length == 0:
-        return np.zeros(drive.shape, dtype=dtype)
-    magnitude = abs(lam)
-    if magnitude == 0.0:
-        return drive.astype(dtype, copy=True)
-    decay = -np.log(magnitude) if magnitude < 1.0 else 0.0
-    block = length if decay == 0.0 else int(max(1, min(length, np.log(_BLOCK_GROWTH) // decay)))
-    tail = drive.shape[1:]
-    n_blocks = -(-length // block)
-    inverse, forward = _block_scales(lam, block)
-    shape = (1, block) + (1,) * len(tail)
-    work = np.empty((n_blocks, block, *tail), dtype=dtype)
-    flat = work.reshape(n_blocks * block, *tail)
-    # z = lam^-(j+1) x (scaled input), then its running sum inside each block
-    np.multiply(drive, np.tile(inverse / lam, n_blocks)[:length].reshape((length,) + (1,) * len(tail)),
-                out=flat[:length])
-    flat[length:] = 0.0
-    np.cumsum(work, axis=1, out=work)
-    # carried state c_b = y at the end of block b-1: c_b = lam^B c_{b-1} + lam^B * running sum_{b-1, last}
-    carry_drive = np.empty((n_blocks, *tail), dtype=dtype)
-    carry_drive[0] = np.asarray(initial, dtype=dtype)
-    carry_drive[1:] = forward[-1] * work[:-1, -1]
-    carry = _doubling_recursion(lam ** block, carry_drive)
-    # y = lam^(j+1) (c_b + running sum)
-    work += carry[:, None]
-    work *= forward.reshape(shape)
-    if out is None:
-        return flat[:length]
-    out[...] = flat[:length]
-    return out
 
 
 @dataclass(frozen=True)
@@ -675,8 +592,10 @@ class TwoStageFilter:
         ----------
         y : array_like
             (L, m) measurements (all present).
-        x_reg : array_like, optional
-            (L, m, p) measurement regressors.
+        x_reg : array_like or RegressorFactors, optional
+            (L, m, p) measurement regressors, or their factors ``X_k = sum_s c_k,s P_s`` (at the
+            steady state the cost per sample is then that of the few scalar series; see
+            :mod:`~taiji2_estimator_pkg.core.factored_steady`).
         u0 : array_like, optional
             (L, n_u) known inputs of each step (the input of a segment's first sample is ignored).
         u_reg : array_like, optional
@@ -691,12 +610,17 @@ class TwoStageFilter:
         """
         m = self.model.m
         y = np.asarray(y, dtype=np.float64).reshape(-1, m)
-        x_reg = None if x_reg is None else np.asarray(x_reg, dtype=np.float64)
+        if not isinstance(x_reg, RegressorFactors):
+            x_reg = None if x_reg is None else np.asarray(x_reg, dtype=np.float64)
         u0 = None if u0 is None else np.asarray(u0, dtype=np.float64)
         u_reg = None if u_reg is None else np.asarray(u_reg, dtype=np.float64)
         parts: list[RegularRunOutput] = []
         start = 0
         while start < y.shape[0]:
+            if self.steady and isinstance(x_reg, RegressorFactors) and self._real_modes and u0 is None \
+                    and u_reg is None and not self.evaluation:
+                run_steady_factored(self, y[start:], x_reg.rows(start, y.shape[0]))
+                break
             if self.steady:
                 stop = y.shape[0]
                 parts.append(self._run_steady(y[start:], _rows(x_reg, start, stop), _rows(u0, start, stop),
