@@ -184,3 +184,13 @@ def test_optional_topics_may_be_absent(tmp_path):
     with pytest.raises(RawBagError, match="missing raw topic /taiji2/maneuver/command"):
         load_raw_bag(tmp_path / "bag")
     shutil.rmtree(tmp_path / "bag")
+
+
+@pytest.mark.parametrize("store", [Stores.ROS2_HUMBLE, Stores.ROS2_JAZZY])
+def test_contract_typestore_has_the_standard_definitions(store):
+    """The light store raw bags are read with defines the standard types as ROS 2 does."""
+    from taiji2_runtime.typestore import CONTRACT_STANDARD_DEFINITIONS, contract_typestore
+
+    standard = get_typestore(store)
+    for msgtype in CONTRACT_STANDARD_DEFINITIONS:
+        assert contract_typestore().fielddefs[msgtype] == standard.fielddefs[msgtype], msgtype

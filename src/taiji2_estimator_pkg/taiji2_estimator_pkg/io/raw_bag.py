@@ -36,7 +36,7 @@ from taiji2_runtime.bag.contract import (
 )
 from taiji2_runtime.bag.errors import BagError
 from taiji2_runtime.bag.reading import check_types, custom_data, open_reader, storage_identifier
-from taiji2_runtime.typestore import typestore
+from taiji2_runtime.typestore import contract_typestore
 
 __all__ = ["CommandData", "GrsData", "RawBagError", "RawExperiment", "StarTrackerData", "TopicReport",
            "load_raw_bag"]
@@ -240,7 +240,7 @@ def _merge(parts: list[RawMessages]) -> RawMessages:
 
 def _decode_topic(topic: str, raw: RawMessages, report: TopicReport) -> dict[str, np.ndarray]:
     """Decoded columns of the kept messages of one raw topic, in bag order, plus ``receive_ns``."""
-    decoded = decode_messages(typestore(), raw.msgtype, raw.pieces)
+    decoded = decode_messages(contract_typestore(), raw.msgtype, raw.pieces)
     columns = decoded.columns
     keep = decoded.valid.copy()
     if decoded.errors:
@@ -331,7 +331,7 @@ def load_raw_bag(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPICS
             storage = storage_identifier(reader)
             custom = custom_data(reader)
             connections = [c for c in reader.connections if c.topic in RAW_TOPICS]
-            checks = check_types(connections, typestore())
+            checks = check_types(connections, contract_typestore())
             raw = read_raw_messages(reader, topics=set(RAW_TOPICS))
     except RawBagError:
         raise
