@@ -1,10 +1,11 @@
 """Monte Carlo of a designed maneuver (taiji2 design) with the batch simulator + offline estimators vs the CRLB.
 
-A plain serial seed loop; each seed is a pure function ``one(layout, maneuver_file, seed)`` so that
-it can become a campaign spec. Reports error std / CRLB per parameter (goal [0.8, 1.25]) and the
-peak total linear acceleration against the range (noise included).
+Each seed is a pure function ``one(layout, maneuver_file, seed)``, run on Dask (the campaign
+engine's ``connect``: an embedded LocalCluster of ``--workers`` single-threaded processes, or
+``--scheduler``). Reports error std / CRLB per parameter (goal [0.8, 1.25]) with the standard error
+of a std over the seeds, and the peak total linear acceleration against the range (noise included).
 
-    python benchmarks/bench_design_mc.py MANEUVER_FILE [--layout type1] [--seeds 20]
+    python benchmarks/bench_design_mc.py MANEUVER_FILE [--layout type1] [--seeds 20] [--workers 2]
 """
 
 from __future__ import annotations
@@ -39,11 +40,22 @@ def main() -> None:
     parser.add_argument("maneuver_file")
     parser.add_argument("--layout", default="type1")
     parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--workers", type=int, default=None, help="local Dask workers (default: one per core)")
+    parser.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
     args = parser.parse_args()
+    from taiji2_estimator_pkg.campaign.engine import connect
     from taiji2_estimator_pkg.design.evaluate import PARAMETER_NAMES, DesignProblem
     from taiji2_sim_pkg.core.maneuver_families import load_maneuver_file
 
-    rows = [one(args.layout, args.maneuver_file, 9000 + s) for s in range(args.seeds)]
+    client, cluster = connect(args.scheduler, args.workers)
+    try:
+        seeds = [9000 + s for s in range(args.seeds)]
+        rows = client.gather(client.map(one, [args.layout] * len(seeds), [args.maneuver_file] * len(seeds), seeds,
+                                        pure=False))
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
     problem = DesignProblem(args.layout)
     maneuver = load_maneuver_file(args.maneuver_file)
     bound = problem.bound(maneuver, maneuver.start_s + maneuver.duration_s)
