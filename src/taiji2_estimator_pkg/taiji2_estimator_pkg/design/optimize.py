@@ -6,8 +6,10 @@ is *projected* onto the constraints: its torque scale s is raised (or lowered) u
 constraint binds (range and attitude are linear in s to O(omega^2), thrust exactly), and torque
 levels below the smallest thrust are switched off. The bound only decreases with s, so the optimum
 of each shape lies on that boundary. Over the shapes: scipy ``differential_evolution`` (seeded,
-the paper's preset in the initial population, stopped at a wall-clock budget) on the fast bound;
-the returned design is then checked on the full simulation and the full bound.
+the paper's preset in the initial population) for the first ``_GLOBAL_SHARE`` of the wall-clock
+budget, then a bounded Nelder-Mead polish of the best shape for the rest (the objective is a
+maximum of ratios, not smooth where two ratios are equal: a simplex method, not a gradient one),
+all on the fast bound; the returned design is then checked on the full simulation and full bound.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import differential_evolution
+from scipy.optimize import differential_evolution, minimize
 
 from .evaluate import DesignProblem, Usage
 from .families import Family, family
@@ -30,6 +32,12 @@ _REFERENCE_N_M = 1e-6
 _SHRINK = 0.995  # safety factor after the O(omega^2) non-linearity of the range check
 _SKIPPED = 1e3  # objective of a candidate not evaluated (budget spent) or infeasible
 _PROGRESS_EVERY_S = 15.0
+_GLOBAL_SHARE = 0.7  # share of the budget for the global search; the rest polishes its best shape
+_SIMPLEX_STEP = 0.05  # initial simplex of the polish: this fraction of each parameter's range
+
+
+class _BudgetSpent(Exception):
+    """The polish ran out of budget (its best evaluation so far is kept)."""
 
 
 @dataclass(frozen=True)
@@ -121,11 +129,14 @@ def optimize(problem: DesignProblem, family_name: str, duration_s: float, constr
     x0 = np.clip(fam.paper_start(paper.period_s, paper.amplitude_n_m, paper.phase_s),
                  [b[0] for b in fam.bounds], [b[1] for b in fam.bounds])
     started = time.monotonic()
-    state = {"n": 0, "best": np.inf, "x": x0, "said": started}
+    state = {"n": 0, "best": np.inf, "x": x0, "said": started, "phase_end": started + _GLOBAL_SHARE * budget_s,
+             "polish": False}
 
     def objective(x: np.ndarray) -> float:
         now = time.monotonic()
-        if now - started > budget_s:
+        if now > state["phase_end"]:
+            if state["polish"]:
+                raise _BudgetSpent
             # scipy checks the callback once per generation (up to 2 x popsize x dim evaluations of
             # ~1 s): past the budget the rest of the generation is skipped, not evaluated
             return _SKIPPED
@@ -144,9 +155,9 @@ def optimize(problem: DesignProblem, family_name: str, duration_s: float, constr
     def callback(*_: Any, **__: Any) -> bool:
         state["said"] = time.monotonic()
         elapsed = state["said"] - started
-        say(f"  design {family_name}: {state['n']} evaluations, best max CRLB/requirement "
-            f"{state['best']:.3f} ({elapsed:.0f} s)")
-        return elapsed > budget_s
+        say(f"  design {family_name}{' (polish)' if state['polish'] else ''}: {state['n']} evaluations, "
+            f"best max CRLB/requirement {state['best']:.3f} ({elapsed:.0f} s)")
+        return state["said"] > state["phase_end"]
 
     say(f"design {family_name}: {len(fam.bounds)} parameters, budget {budget_s:.0f} s, seed {seed}")
     objective(x0)
@@ -154,8 +165,28 @@ def optimize(problem: DesignProblem, family_name: str, duration_s: float, constr
     differential_evolution(objective, fam.bounds, x0=x0, seed=seed, popsize=max(2, 24 // len(fam.bounds)),
                            maxiter=10_000, polish=False, init="sobol", tol=0.0, callback=callback,
                            mutation=(0.5, 1.0), recombination=0.7)
+    _polish(objective, fam, state, started + budget_s)
     x = state["x"]
     maneuver, scale, binding = project(problem, fam, x, duration_s, constraints)
     ratios = problem.ratios(maneuver, duration_s, fam.period_s(x), fast=True)
     return DesignResult(family_name, x, maneuver, fam.period_s(x), scale, binding, ratios, state["n"],
                         time.monotonic() - started)
+
+
+def _polish(objective: Callable[[np.ndarray], float], fam: Family, state: dict[str, Any], end: float) -> None:
+    """Bounded Nelder-Mead from the best shape until ``end`` (monotonic s); ``state`` keeps the best."""
+    if time.monotonic() >= end or not np.isfinite(state["best"]):
+        return
+    lower, upper = np.array([b[0] for b in fam.bounds]), np.array([b[1] for b in fam.bounds])
+    start = np.array(state["x"], dtype=np.float64)
+    # simplex: the best shape and one step along each parameter, inwards where a bound is near
+    steps = _SIMPLEX_STEP * (upper - lower)
+    simplex = np.tile(start, (start.size + 1, 1))
+    for i in range(start.size):
+        simplex[i + 1, i] += steps[i] if start[i] + steps[i] <= upper[i] else -steps[i]
+    state["polish"], state["phase_end"] = True, end
+    try:
+        minimize(objective, start, method="Nelder-Mead", bounds=list(fam.bounds),
+                 options={"initial_simplex": simplex, "xatol": 1e-6, "fatol": 1e-6, "maxfev": 100_000})
+    except _BudgetSpent:
+        pass
