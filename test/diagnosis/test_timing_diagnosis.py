@@ -54,6 +54,29 @@ def test_reference_latency_configured_is_no_gap(latency_data):
     assert result.verdict["summary"] == "no significant gap", result.verdict["summary"]
 
 
+def test_latency_and_lag_are_fitted_jointly():
+    """A command latency and a thruster lag together (reference fidelity, 3 h): the delay and lag
+    signatures are exact only jointly. Fitted side by side, the split came out 0.052 / 0.148 s
+    +- 0.006 s (11 sigma off) with a residual of significance 408 at torque_z 0.3-1 Hz; the joint
+    fit (engine._joint_timing) finds the split within its sigma. Checks (seeded, 3 sigma): no
+    physical effect named, latency and lag each within 3 sigma of the truth, and the residual left
+    at the torque channels at most 2 % of that of the side-by-side fit (in -log10 p; 5.4 measured). What remains
+    is second order in the calibration (docs/diagnosis.md section 11): the same data with the
+    timing configured read "no significant gap"."""
+    data_config = load_config("type1", {"timing.actuation_latency_s": 0.12, "timing.thruster_time_constant_s": 0.08})
+    commands = maneuver_torque_commands(data_config, 3 * HOUR)
+    out = simulate_reference(data_config, 45, commands)
+    inp = prepare_input(out.t_s, out.st_quat_xyzw, out.voltages_v, commands, data_config.sample_rate_hz)
+    result = diagnose(inp, load_config("type1"))
+    named = {e.name: e for e in result.effects if e.accepted}
+    assert set(named) == {"actuation_delay", "thruster_response"}, result.verdict["summary"]
+    delay, lag = named["actuation_delay"], named["thruster_response"]
+    assert abs(delay.magnitude - 0.12) < 3.0 * delay.sigma
+    assert abs(lag.magnitude - 0.08) < 3.0 * lag.sigma
+    assert all(loc["significance"] < 8.16 for loc in result.verdict["remaining"]
+               if loc["channel"].startswith("torque")), result.verdict["remaining"]
+
+
 def test_start_stamp_convention_is_a_grs_time_offset():
     # GRS stamped at the start of its integration interval: every GRS sample is 0.1 s early for the
     # nominal ("end") model, i.e. a GRS time offset of -0.1 s (docs/interfaces.md)

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -97,6 +97,11 @@ class CandidateContext:
         Suspension of the tm_stiffness candidate.
     t_mid_s : float
         Reference time of the drifts [s] (middle of the full record).
+    timing_base : dict
+        Fitted timing the actuation signatures are conditioned on, beyond the model's:
+        ``"delay_s"`` and ``"time_constant_s"`` (default 0). A delay's signature is then
+        ``tau_act(D0 + d + tau, T0 + t) - tau_act(D0 + d, T0 + t)``, exact jointly with the lag ``t``
+        fitted beside it (see :meth:`.record.Record.condition_timing`).
     """
 
     lin: Linearization
@@ -106,6 +111,7 @@ class CandidateContext:
     suspension_hz: float
     damping: float
     t_mid_s: float
+    timing_base: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -140,6 +146,9 @@ class Candidate:
     grid : numpy.ndarray or None
         Magnitudes the exact scan visits (timing candidates: their knot range); None: around the
         linear estimate.
+    exact : callable or None
+        ``exact(ctx, theta) -> (n, 15)``: the channel change at any magnitude, not interpolated
+        (timing candidates; conditioned on ``ctx.timing_base``).
     """
 
     name: str
@@ -152,6 +161,7 @@ class Candidate:
     coefficients: Callable[[float], np.ndarray] | None = None
     bound: Callable[[CandidateContext], float] | None = None
     grid: np.ndarray | None = None
+    exact: Callable[[CandidateContext, float], np.ndarray] | None = None
 
     @property
     def is_timing(self) -> bool:
@@ -475,6 +485,17 @@ def _actuation_change(ctx: CandidateContext, delay_s: float, time_constant_s: fl
     return _torque_column(ctx, moved - ctx.readouts.torque_cmd_n_m)
 
 
+def _conditioned_change(ctx: CandidateContext, delay_s: float, time_constant_s: float) -> np.ndarray:
+    """Torque-channel change (n, 15) of an extra delay and lag from the conditioned timing
+    (the model's plus ``ctx.timing_base``): ``tau_act(D + delay, T + lag) - tau_act(D, T)``."""
+    base_d = ctx.model.delay_s + ctx.timing_base.get("delay_s", 0.0)
+    base_t = max(ctx.model.time_constant_s + ctx.timing_base.get("time_constant_s", 0.0), 0.0)
+    moved = _actuation_change(ctx, base_d + delay_s, max(base_t + time_constant_s, 0.0))
+    if base_d == ctx.model.delay_s and base_t == ctx.model.time_constant_s:
+        return moved
+    return moved - _actuation_change(ctx, base_d, base_t)
+
+
 def _knot_candidate(name: str, param: str, knots: np.ndarray,
                     channels_at: Callable[[CandidateContext, float], np.ndarray],
                     inject: Callable[[np.ndarray, NominalModel], dict[str, Any]]) -> Candidate:
@@ -497,7 +518,7 @@ def _knot_candidate(name: str, param: str, knots: np.ndarray,
                 else channels_at(ctx, step) / step]
 
     grid = np.unique(np.concatenate([np.linspace(knots[0], knots[-1], 2001), knots]))
-    return Candidate(name, "", (param,), "s", build, inject, series, coefficients, None, grid)
+    return Candidate(name, "", (param,), "s", build, inject, series, coefficients, None, grid, channels_at)
 
 
 def _actuation_delay(model_delay_s: float, dt_s: float) -> Candidate:
@@ -505,7 +526,7 @@ def _actuation_delay(model_delay_s: float, dt_s: float) -> Candidate:
                          math.ceil((model_delay_s + DELAY_RANGE_S) / (0.5 * dt_s)) + 1) * 0.5 * dt_s
 
     def channels_at(ctx: CandidateContext, tau: float) -> np.ndarray:
-        return _actuation_change(ctx, ctx.model.delay_s + tau, ctx.model.time_constant_s)
+        return _conditioned_change(ctx, tau, 0.0)
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         return {"name": "actuation_delay", "delay_s": float(theta[0])}
@@ -519,7 +540,7 @@ def _grs_time_offset(model_delay_s: float, dt_s: float) -> Candidate:
 
     def channels_at(ctx: CandidateContext, delta: float) -> np.ndarray:
         # GRS stamped delta late = the physics delayed by delta, the star tracker read delta early
-        torque = _actuation_change(ctx, ctx.model.delay_s + delta, ctx.model.time_constant_s)
+        torque = _conditioned_change(ctx, delta, 0.0)
         return torque + perturbation_channels(ctx.lin, ctx.model, datt=delta * ctx.lin.omega)
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
@@ -534,7 +555,7 @@ def _thruster_response(model_time_constant_s: float) -> Candidate:
     absolute = np.unique(np.append(absolute[absolute + 1e-12 >= 0.0], model_time_constant_s))
 
     def channels_at(ctx: CandidateContext, extra: float) -> np.ndarray:
-        return _actuation_change(ctx, ctx.model.delay_s, max(ctx.model.time_constant_s + extra, 0.0))
+        return _conditioned_change(ctx, 0.0, extra)
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         return {"name": "thruster_response", "time_constant_s": float(theta[0])}

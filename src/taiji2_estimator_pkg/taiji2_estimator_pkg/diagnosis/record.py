@@ -20,6 +20,8 @@ from .spectral import Design, NoiseSpectrum, Whitener, dft
 
 __all__ = ["Record", "RecordSettings", "calibrate", "column_fft"]
 
+_FIXED = "__fixed_change__"  # a scratch design column for fits with a fixed channel change
+
 
 class RecordSettings:
     """The options a record needs (a subset of :class:`.engine.DiagnosisOptions`).
@@ -99,6 +101,8 @@ class Record:
         self.st_template = self.spectrum.st_template(self.bins, settings.st_corner_hz)
         self.kappa = 0.0
         self.secant: dict[str, float] = {}
+        self.timing_bases: dict[str, dict[str, float]] = {}
+        self.exact_secants: dict[str, np.ndarray] = {}
         self._torque_psd: np.ndarray | None = None
         self.whitener: Whitener
         self.design: Design
@@ -136,16 +140,64 @@ class Record:
         names = candidate.series_names()
         missing = [name for name in names if name not in self.ffts]
         if missing and candidate.series is not None:
-            ffts = [column_fft(column, self.k_max) for column in candidate.series(self.ctx)]
+            ffts = [column_fft(column, self.k_max) for column in self._series(candidate)]
             for name, fft in zip(names, ffts, strict=True):
                 self.ffts[name] = fft
             self.names = [*self.names, *names]
             self.design.append(self.whitener, names, ffts)
         return names
 
+    def _series(self, candidate: Candidate) -> list[np.ndarray]:
+        """A series candidate's columns, conditioned on the timing recorded for it (if any)."""
+        assert candidate.series is not None
+        self.ctx.timing_base.clear()
+        self.ctx.timing_base.update(self.timing_bases.get(candidate.key, {}))
+        try:
+            return candidate.series(self.ctx)
+        finally:
+            self.ctx.timing_base.clear()
+
+    def condition_timing(self, candidate: Candidate, base: dict[str, float]) -> None:
+        """Rebuild an actuation-timing candidate's series conditioned on other fitted timing.
+
+        ``base``: ``{"delay_s": d, "time_constant_s": t}`` beyond the model's timing. The delay and
+        lag signatures do not add (the thrust under both is not the sum of the thrust under each):
+        with one of them conditioned on the other's fitted value and the other not, the two columns
+        sum exactly to the joint change at the fitted pair. The column is then the secant at the
+        candidate's current magnitude, as after :meth:`relinearise`.
+        """
+        if candidate.series is None:
+            return
+        self.timing_bases[candidate.key] = dict(base)
+        names = self._ensure_series(candidate)
+        for name, column in zip(names, self._series(candidate), strict=True):
+            self.ffts[name] = column_fft(column, self.k_max)
+            self.design.replace(self.whitener, name, self.ffts[name])
+        self.relinearise(candidate, np.array([self.secant.get(candidate.key, 0.0)]))
+
+    def set_exact_secant(self, candidate: Candidate, value: float, change: np.ndarray) -> None:
+        """Make a one-parameter candidate's column ``change / value`` ((n, 15) channel change at
+        ``value``, computed exactly rather than from its knots): theta x column is then exact at value."""
+        (name,) = candidate.column_names()
+        column = change / value if value != 0.0 else change
+        self.exact_secants[candidate.key] = column
+        self.ffts[name] = column_fft(column, self.k_max)
+        self.design.replace(self.whitener, name, self.ffts[name])
+        self.secant[candidate.key] = float(value)
+
+    def chi2_with_column(self, free: Sequence[str], change: np.ndarray) -> float:
+        """Chi-square after subtracting a fixed (n, 15) channel change and refitting ``free``."""
+        fft = column_fft(change, self.k_max)
+        if _FIXED not in self.design.names:
+            self.design.append(self.whitener, [_FIXED], [fft])
+        else:
+            self.design.replace(self.whitener, _FIXED, fft)
+        return self.design.chi2_with_offset(self.indices(free), self.indices([_FIXED]), np.ones(1))
+
     def relinearise(self, candidate: Candidate, theta: np.ndarray) -> None:
         """Replace a polynomial signature's column by its secant at ``theta``: theta x column = the
         exact (series) channel change, so that a linear fit near theta is consistent."""
+        self.exact_secants.pop(candidate.key, None)
         if candidate.series is None or candidate.coefficients is None:
             return
         value = float(np.ravel(theta)[0])
@@ -268,11 +320,13 @@ class Record:
     # time domain --------------------------------------------------------------------------
     def _candidate_columns(self, candidate: Candidate) -> list[np.ndarray]:
         """Time-domain columns of a candidate at its current linearisation (the secant, if relinearised)."""
+        if candidate.key in self.exact_secants:
+            return [self.exact_secants[candidate.key]]
         value = self.secant.get(candidate.key)
         if value is None or candidate.series is None:
             return candidate.build(self.ctx)
         weights = self._secant_weights(candidate, value)
-        return [sum(w * c for w, c in zip(weights, candidate.series(self.ctx), strict=True))]
+        return [sum(w * c for w, c in zip(weights, self._series(candidate), strict=True))]
 
     def time_column(self, name: str) -> np.ndarray:
         """(n, 15) column by name (recomputed)."""
