@@ -55,9 +55,13 @@ def test_json_output_has_the_documented_keys_and_matches_the_core(contract_bag, 
     record = align_streams(stamps, simulated.st_quat_xyzw,
                            {g: (stamps, simulated.voltages_v[:, g - 1]) for g in (1, 2)}, 10.0)
     direct = calibrate(record, instrument).to_dict()
+    # tolerance: 1e-6 sigma (the process and the test differ only in rounding: BLAS kernels pick
+    # their summation order by thread count and memory alignment, and d is solved from a normal
+    # matrix with a condition number of ~1e7)
     for grs in ("grs1", "grs2"):
-        np.testing.assert_allclose(result[grs]["scale_factors"], direct[grs]["scale_factors"], rtol=1e-12)
-        np.testing.assert_allclose(result[grs]["com_offset"], direct[grs]["com_offset"], rtol=1e-9, atol=1e-12)
+        for key in ("scale_factors", "com_offset"):
+            sigma = np.sqrt(np.diag(direct[grs][f"{key}_cov"]))
+            assert np.all(np.abs(np.subtract(result[grs][key], direct[grs][key])) <= 1e-6 * sigma), key
     # and close to the truth: within 4 sigma (seeded; a 4-sigma miss has probability ~6e-5 per parameter)
     truth_g = simulated.truth.grs_angular_scale_factors[-1]
     for i, grs in enumerate(("grs1", "grs2")):

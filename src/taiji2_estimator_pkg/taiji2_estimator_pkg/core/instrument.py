@@ -23,9 +23,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from numpy.typing import ArrayLike
-
-from taiji2_runtime.yaml_load import safe_load
 
 from .noise_model import NoiseBudget, _get
 
@@ -102,7 +101,7 @@ def load_layout_mapping(source: str | os.PathLike[str] | Mapping[str, Any] | Any
             raise ValueError(f"layout {str(source)!r}: no such file or built-in layout")
         path = layouts[str(source)]
     with open(path, encoding="utf-8") as stream:
-        raw = safe_load(stream)
+        raw = yaml.safe_load(stream)
     if not isinstance(raw, dict):
         raise ValueError(f"layout {str(path)!r}: not a mapping")
     return raw

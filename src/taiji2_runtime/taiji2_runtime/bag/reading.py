@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import yaml
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
@@ -24,8 +25,6 @@ from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from rosbags.typesys import get_types_from_idl, get_types_from_msg
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
-
-from taiji2_runtime.yaml_load import safe_load
 
 from .errors import BagError
 
@@ -83,7 +82,7 @@ def _culprit(bag: Path) -> Path | None:
         return None
     try:
         with (bag / "metadata.yaml").open(encoding="utf-8") as stream:
-            info = safe_load(stream)["rosbag2_bagfile_information"]
+            info = yaml.safe_load(stream)["rosbag2_bagfile_information"]
         names = [Path(str(name)).name for name in info["relative_file_paths"]]
         plugin = Sqlite3Reader if info.get("storage_identifier") == "sqlite3" else McapReader
     except Exception:  # the metadata itself is the problem

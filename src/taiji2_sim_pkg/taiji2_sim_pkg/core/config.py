@@ -21,8 +21,6 @@ from typing import Any
 import numpy as np
 import yaml
 
-from taiji2_runtime.yaml_load import safe_load
-
 from .config_schema import (
     _VECTOR_NOISE_KEYS,
     _VECTOR_NOISE_UNITS,
@@ -100,7 +98,7 @@ def _is_layout_file(path: Path) -> bool:
     directory also holds node parameter files, which are not layouts."""
     try:
         with open(path, encoding="utf-8") as stream:
-            content = safe_load(stream)
+            content = yaml.safe_load(stream)
     except (OSError, yaml.YAMLError):
         return False
     return isinstance(content, dict) and _LAYOUT_SECTIONS <= set(content)
@@ -168,7 +166,7 @@ def load_config(
             raise ConfigError("layout", f"unknown layout {str(source)!r} (built-in: {known})")
         try:
             with open(path, encoding="utf-8") as stream:
-                raw = safe_load(stream)
+                raw = yaml.safe_load(stream)
         except OSError as error:
             raise ConfigError("layout", f"cannot read {str(path)!r}: {error}") from error
         except yaml.YAMLError as error:
