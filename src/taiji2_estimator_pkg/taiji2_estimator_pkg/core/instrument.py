@@ -101,7 +101,7 @@ def load_layout_mapping(source: str | os.PathLike[str] | Mapping[str, Any] | Any
             raise ValueError(f"layout {str(source)!r}: no such file or built-in layout")
         path = layouts[str(source)]
     with open(path, encoding="utf-8") as stream:
-        raw = yaml.safe_load(stream)
+        raw = yaml.load(stream, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))  # libyaml where built
     if not isinstance(raw, dict):
         raise ValueError(f"layout {str(path)!r}: not a mapping")
     return raw

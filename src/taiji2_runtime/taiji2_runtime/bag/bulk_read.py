@@ -1,10 +1,10 @@
 """Bulk access to the raw CDR bytes and receive stamps of a bag, without a Python loop per message.
 
 MCAP: every chunk is read once (decompressed when needed, checksum verified) and the messages of
-each channel are located from the chunk's message-index records with numpy. sqlite3: one query
-per topic. Anything unusual (an MCAP file without chunk or message indexes, a storage this module
-does not know) falls back to iterating rosbags' reader, so the result is the same for every bag
-rosbags opens, only slower.
+each channel are located from the chunk's message-index records with numpy. sqlite3: one table
+scan, each topic's rows aggregated inside SQLite. Anything unusual (an MCAP file without chunk or
+message indexes, a storage this module does not know) falls back to iterating rosbags' reader, so
+the result is the same for every bag rosbags opens, only slower.
 
 The result per ``(topic, type)`` is a :class:`RawMessages`: receive stamps and the byte ranges of
 each serialised message (4-byte CDR encapsulation header included) in one or more byte buffers.
@@ -211,43 +211,68 @@ def _read_mcap(storage: McapReader, path: Path, wanted: dict[int, Key], with_dat
         part.pieces.append(RawPiece(blob, offsets, lengths))
 
 
+#: most topics read by one sqlite3 query (3 aggregate columns each; SQLite's column limit is 2000)
+_SQLITE_TOPICS_PER_QUERY = 100
+
+
+def _sqlite_integers(text: str | None) -> np.ndarray:
+    """int64 array from SQLite's comma-separated ``group_concat`` of integers (NULL: empty)."""
+    if not text:
+        return np.zeros(0, np.int64)
+    return np.fromstring(text, dtype=np.int64, sep=",")
+
+
 def _read_sqlite(storage: Sqlite3Reader, wanted: set[Key], with_data: bool,
                  parts: dict[Key, _Partial]) -> None:
+    """Every wanted topic in one table scan, its rows aggregated inside SQLite.
+
+    Per topic, SQLite concatenates the ids, stamps and data lengths as text and the data as one
+    blob (``group_concat`` skips the NULLs of the other topics' rows), so no Python object is made
+    per message; numpy then orders the messages by (timestamp, id), the order of rosbags' reader.
+    A value that is not an integer where one belongs, or a topic whose data exceed SQLite's
+    largest blob, leaves the fast path (the generic iteration reads the same rows).
+    """
     db = storage.dbconn
     if db is None:
         raise _FastPathUnavailable("sqlite3 storage not open")
     ids = {int(tid): (name, mtype) for tid, name, mtype in db.execute("SELECT id, name, type FROM topics")
            if (name, mtype) in wanted}
-    if not ids:
-        return
-    columns = "topic_id, timestamp, data" if with_data else "topic_id, timestamp"
-    placeholders = ",".join("?" for _ in ids)
-    # rows in id order (a table scan), then sorted by timestamp with a stable sort: the order of
-    # "ORDER BY timestamp, id" without SQLite walking the timestamp index row by row
-    rows = db.execute(f"SELECT {columns} FROM messages WHERE topic_id IN ({placeholders}) ORDER BY id",
-                      tuple(ids)).fetchall()
-    if not rows:
-        return
-    unzipped = list(zip(*rows, strict=True))
-    stamps = np.asarray(unzipped[1], dtype=np.int64)
-    order = np.argsort(stamps, kind="stable")
-    stamps = stamps[order]
-    topic_ids = np.asarray(unzipped[0], dtype=np.int64)[order]
-    if with_data:
-        datas = unzipped[2]
-        lengths = np.fromiter(map(len, datas), dtype=np.int64, count=len(datas))
-        blob = np.frombuffer(b"".join(datas), dtype=np.uint8)
-        offsets = np.zeros_like(lengths)
-        np.cumsum(lengths[:-1], out=offsets[1:])
-        offsets, lengths = offsets[order], lengths[order]
-    for tid, key in ids.items():
-        mask = topic_ids == tid
-        if not mask.any():
-            continue
-        part = parts.setdefault(key, _Partial())
-        part.times.append(stamps[mask])
-        if with_data:
-            part.pieces.append(RawPiece(blob, offsets[mask], lengths[mask]))
+    topic_ids = sorted(ids)
+    for first in range(0, len(topic_ids), _SQLITE_TOPICS_PER_QUERY):
+        batch = topic_ids[first:first + _SQLITE_TOPICS_PER_QUERY]
+        columns = []
+        for tid in batch:
+            columns += [f"group_concat(CASE topic_id WHEN {tid} THEN id END, ',')",
+                        f"group_concat(CASE topic_id WHEN {tid} THEN timestamp END, ',')"]
+            if with_data:
+                columns += [f"group_concat(CASE topic_id WHEN {tid} THEN length(data) END, ',')",
+                            f"CAST(group_concat(CASE topic_id WHEN {tid} THEN data END, x'') AS BLOB)"]
+        try:
+            row = db.execute(f"SELECT {', '.join(columns)} FROM messages").fetchone()
+        except Exception as exc:  # apsw.TooBigError: a topic's data beyond SQLite's largest blob
+            raise _FastPathUnavailable(f"sqlite3 aggregate: {exc}") from exc
+        width = 4 if with_data else 2
+        for position, tid in enumerate(batch):
+            cells = row[position * width:(position + 1) * width]
+            try:
+                row_ids, stamps = _sqlite_integers(cells[0]), _sqlite_integers(cells[1])
+                lengths = _sqlite_integers(cells[2]) if with_data else None
+            except ValueError as exc:  # a non-integer stamp: let rosbags read it as it can
+                raise _FastPathUnavailable(f"sqlite3 column: {exc}") from exc
+            if not stamps.size:
+                continue
+            if stamps.size != row_ids.size or (lengths is not None and lengths.size != stamps.size):
+                raise _FastPathUnavailable("sqlite3 aggregates of unequal length")
+            order = np.lexsort((row_ids, stamps))
+            part = parts.setdefault(ids[tid], _Partial())
+            part.times.append(stamps[order])
+            if lengths is not None:
+                blob = np.frombuffer(cells[3] or b"", dtype=np.uint8)
+                if int(lengths.sum()) != blob.shape[0]:
+                    raise _FastPathUnavailable("sqlite3 data of another length than length(data)")
+                offsets = np.zeros_like(lengths)
+                np.cumsum(lengths[:-1], out=offsets[1:])
+                part.pieces.append(RawPiece(blob, offsets[order], lengths[order]))
 
 
 def _read_generic(reader: Reader, keys: Collection[Key], with_data: bool) -> dict[Key, _Partial]:
