@@ -8,7 +8,8 @@ Bags of the same simulated 3-h Type-1 experiment (seed 7), raw contract topics:
     other message order and bag stamps; sqlite3 written topic by topic);
   * ground-segment-mcap: rosbags, our stamp conventions (``test/contract_bags.py``).
 
-For each bag, paired runs (calibrate, then its baseline, repeated; medians printed):
+For each bag, paired runs (calibrate, then its baseline, repeated after one untimed warm-up pair;
+medians printed; processes get bytecode caches as an installed package has them):
   * whole process: ``taiji2 calibrate BAG --layout type1 --json`` as a user runs it, against a
     process that reads the same bag with plain rosbags ``Reader`` + ``deserialize_cdr``;
   * in-process: load + align + both estimator cores, against the same rosbags read in-process.
@@ -59,6 +60,9 @@ with Reader(sys.argv[1]) as reader:
 print(count)
 """
 DISCOVERY_S = 0.6  # the fixed discovery wait of `taiji2 topic list`
+# Processes run as on a user's installation: bytecode caches written (an installed package has them;
+# PYTHONDONTWRITEBYTECODE would recompile every module of every run) and warmed by one untimed run.
+PROCESS_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
 
 def write_bags(root: Path, duration_s: float, names: list[str]) -> dict[str, Path]:
@@ -107,7 +111,7 @@ def baseline_in_process(path: Path) -> int:
 
 def timed_process(argv: list[str]) -> float:
     start = time.perf_counter()
-    proc = subprocess.run(argv, capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=600, env=PROCESS_ENV)
     elapsed = time.perf_counter() - start
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(argv)} failed: {proc.stderr.strip()[-400:]}")
@@ -117,7 +121,7 @@ def timed_process(argv: list[str]) -> float:
 def first_output_s(argv: list[str], env: dict[str, str] | None = None) -> float:
     """Seconds from process start to its first byte on stdout."""
     start = time.perf_counter()
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env)
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env or PROCESS_ENV)
     assert proc.stdout is not None
     proc.stdout.read(1)
     elapsed = time.perf_counter() - start
@@ -128,6 +132,8 @@ def first_output_s(argv: list[str], env: dict[str, str] | None = None) -> float:
 
 def paired(first: object, second: object, repeats: int) -> tuple[list[float], list[float]]:
     a, b = [], []
+    first()  # type: ignore[operator]  # warm-up, untimed: bytecode caches, page cache
+    second()  # type: ignore[operator]
     for _ in range(repeats):
         a.append(first())  # type: ignore[operator]
         b.append(second())  # type: ignore[operator]
@@ -150,7 +156,7 @@ def main() -> None:
     parser.add_argument("--bags", default=",".join(BAGS), help=f"comma-separated subset of {', '.join(BAGS)}")
     args = parser.parse_args()
     names = [n for n in args.bags.split(",") if n]
-    env = dict(os.environ)
+    env = dict(PROCESS_ENV)
     with tempfile.TemporaryDirectory() as tmp:
         bags = write_bags(Path(tmp), args.duration_s, names)
         print(f"bags: {args.duration_s:g} s, Type-1, two GRS, raw contract topics; {args.repeats} paired runs each")
