@@ -115,3 +115,31 @@ def test_read_raw_messages_equals_rosbags_reader(tmp_path, storage, compress):
         stamps_only = read_raw_messages(reader, with_data=False)
     for key, messages in stamps_only.items():
         assert messages.log_time_ns.tolist() == bulk[key].log_time_ns.tolist()
+
+
+def test_sqlite3_aggregate_read_orders_ties_and_keeps_empty_topics(tmp_path):
+    """sqlite3: messages of equal stamps stay in insertion (id) order, rows interleaved across topics
+    are separated, a topic without messages is listed empty; bytes as rosbags reads them."""
+    store = typestore()
+    bag = tmp_path / "bag"
+    writer = Writer(bag, version=9, storage_plugin=StoragePlugin.SQLITE3)
+    writer.open()
+    used = writer.add_connection("/a", TYPES[1], typestore=store)
+    other = writer.add_connection("/b", TYPES[0], typestore=store)
+    writer.add_connection("/silent", TYPES[2], typestore=store)
+    rng = np.random.default_rng(5)
+    for k in range(400):
+        connection, msgtype = (used, TYPES[1]) if k % 3 else (other, TYPES[0])
+        raw = encode_messages(store, msgtype, _columns(store, msgtype, 1, rng), 1)[0]
+        writer.write(connection, 5000 - 10 * (k // 7), raw)  # stamps descending in blocks of 7 equal ones
+    writer.close()
+    with open_reader(bag) as reader:
+        bulk = read_raw_messages(reader)
+        reference: dict = {}
+        for connection, stamp, data in reader.messages():
+            reference.setdefault(connection.topic, []).append((stamp, data))
+    by_topic = {key[0]: value for key, value in bulk.items()}
+    assert by_topic["/silent"].count == 0 and by_topic["/silent"].messages() == []
+    for topic in ("/a", "/b"):
+        assert by_topic[topic].log_time_ns.tolist() == [s for s, _ in reference[topic]]
+        assert by_topic[topic].messages() == [d for _, d in reference[topic]]
