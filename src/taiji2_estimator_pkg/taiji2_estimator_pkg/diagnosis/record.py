@@ -101,7 +101,6 @@ class Record:
         self.st_template = self.spectrum.st_template(self.bins, settings.st_corner_hz)
         self.kappa = 0.0
         self.secant: dict[str, float] = {}
-        self.timing_bases: dict[str, dict[str, float]] = {}
         self.exact_secants: dict[str, np.ndarray] = {}
         self._torque_psd: np.ndarray | None = None
         self.whitener: Whitener
@@ -140,40 +139,12 @@ class Record:
         names = candidate.series_names()
         missing = [name for name in names if name not in self.ffts]
         if missing and candidate.series is not None:
-            ffts = [column_fft(column, self.k_max) for column in self._series(candidate)]
+            ffts = [column_fft(column, self.k_max) for column in candidate.series(self.ctx)]
             for name, fft in zip(names, ffts, strict=True):
                 self.ffts[name] = fft
             self.names = [*self.names, *names]
             self.design.append(self.whitener, names, ffts)
         return names
-
-    def _series(self, candidate: Candidate) -> list[np.ndarray]:
-        """A series candidate's columns, conditioned on the timing recorded for it (if any)."""
-        assert candidate.series is not None
-        self.ctx.timing_base.clear()
-        self.ctx.timing_base.update(self.timing_bases.get(candidate.key, {}))
-        try:
-            return candidate.series(self.ctx)
-        finally:
-            self.ctx.timing_base.clear()
-
-    def condition_timing(self, candidate: Candidate, base: dict[str, float]) -> None:
-        """Rebuild an actuation-timing candidate's series conditioned on other fitted timing.
-
-        ``base``: ``{"delay_s": d, "time_constant_s": t}`` beyond the model's timing. The delay and
-        lag signatures do not add (the thrust under both is not the sum of the thrust under each):
-        with one of them conditioned on the other's fitted value and the other not, the two columns
-        sum exactly to the joint change at the fitted pair. The column is then the secant at the
-        candidate's current magnitude, as after :meth:`relinearise`.
-        """
-        if candidate.series is None:
-            return
-        self.timing_bases[candidate.key] = dict(base)
-        names = self._ensure_series(candidate)
-        for name, column in zip(names, self._series(candidate), strict=True):
-            self.ffts[name] = column_fft(column, self.k_max)
-            self.design.replace(self.whitener, name, self.ffts[name])
-        self.relinearise(candidate, np.array([self.secant.get(candidate.key, 0.0)]))
 
     def set_exact_secant(self, candidate: Candidate, value: float, change: np.ndarray) -> None:
         """Make a one-parameter candidate's column ``change / value`` ((n, 15) channel change at
@@ -326,7 +297,7 @@ class Record:
         if value is None or candidate.series is None:
             return candidate.build(self.ctx)
         weights = self._secant_weights(candidate, value)
-        return [sum(w * c for w, c in zip(weights, self._series(candidate), strict=True))]
+        return [sum(w * c for w, c in zip(weights, candidate.series(self.ctx), strict=True))]
 
     def time_column(self, name: str) -> np.ndarray:
         """(n, 15) column by name (recomputed)."""

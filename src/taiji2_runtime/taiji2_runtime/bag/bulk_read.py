@@ -211,7 +211,7 @@ def _read_mcap(storage: McapReader, path: Path, wanted: dict[int, Key], with_dat
         part.pieces.append(RawPiece(blob, offsets, lengths))
 
 
-#: most topics read by one sqlite3 query (3 aggregate columns each; SQLite's column limit is 2000)
+#: most topics read by one sqlite3 query (4 aggregate columns each; SQLite's column limit is 2000)
 _SQLITE_TOPICS_PER_QUERY = 100
 
 
