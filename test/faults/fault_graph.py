@@ -88,6 +88,8 @@ class Graph:
     bags: list[Path] = field(default_factory=list)
     diagnostics: list[Diagnostic] = field(default_factory=list)
     latest: dict[str, Any] = field(default_factory=dict)
+    #: the simulator's latest /clock [s] (-1 before the first)
+    sim_time_s: float = -1.0
     exit_codes: dict[str, list[int]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -101,6 +103,7 @@ class Graph:
             cls = t.ScaleFactorEstimate if topic.endswith("scale_factors") else t.ComOffsetEstimate
             self.node.create_subscription(cls, topic, lambda m, k=topic: self.latest.__setitem__(k, m), qos)
         self.node.create_subscription(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", self._on_diag, 100)
+        self.node.create_subscription(messages.rosgraph_msgs.Clock, "/clock", self._on_clock, 10)
 
     # -- processes -------------------------------------------------------------------------------
     def argv(self, name: str) -> list[str]:
@@ -189,16 +192,33 @@ class Graph:
             self.diagnostics.append(Diagnostic(s.name, int.from_bytes(s.level, "little") if isinstance(
                 s.level, bytes) else int(s.level), s.message, values))
 
+    def _on_clock(self, msg: Any) -> None:
+        self.sim_time_s = msg.clock.sec + msg.clock.nanosec / _NS
+
     def spin_for(self, seconds: float) -> None:
         deadline = time.monotonic() + seconds
         while time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=0.05)
 
     def spin_until(self, predicate: Any, timeout_s: float, what: str) -> None:
+        """Spin the monitor until ``predicate()``; a timeout, or a node that died meanwhile, fails the
+        test with the tail of every node's log (a CI failure must say which node stopped and why)."""
         deadline = time.monotonic() + timeout_s
         while not predicate():
-            assert time.monotonic() < deadline, f"timed out after {timeout_s} s waiting for {what}"
+            dead = self.dead()
+            assert not dead, f"{', '.join(dead)} died while waiting for {what}\n{self.log_tails()}"
+            assert time.monotonic() < deadline, f"timed out after {timeout_s} s waiting for {what}\n{self.log_tails()}"
             self.executor.spin_once(timeout_sec=0.05)
+
+    def log_tails(self, lines: int = 12) -> str:
+        """The last ``lines`` lines of each node's log, and the latest estimate stamp per topic."""
+        out = [f"estimate stamps [s]: {({t: round(self.stamp_s(t), 1) for t in ESTIMATE_TOPICS})}"]
+        for name in NODES:
+            path = self.root / f"{name}.log"
+            tail = path.read_text(errors="replace").splitlines()[-lines:] if path.exists() else ["(no log)"]
+            out.append(f"--- {name} (exit {self.procs[name].poll() if name in self.procs else None}):")
+            out.extend(line[:300] for line in tail)
+        return "\n".join(out)
 
     def stamp_s(self, topic: str) -> float:
         m = self.latest.get(topic)
@@ -210,6 +230,10 @@ class Graph:
 
     def wait_for_progress(self, t_s: float, timeout_s: float = 60.0) -> None:
         self.spin_until(lambda: self.progress_s() >= t_s, timeout_s, f"the estimates to reach t = {t_s} s")
+
+    def wait_for_sim_time(self, t_s: float, timeout_s: float = 60.0) -> None:
+        """Spin until the simulator's clock reached ``t_s`` [s] (the estimators may trail it)."""
+        self.spin_until(lambda: self.sim_time_s >= t_s, timeout_s, f"the simulator to reach t = {t_s} s")
 
     def wait_for_end(self, timeout_s: float = 120.0) -> None:
         self.wait_for_progress(self.duration_s, timeout_s)
