@@ -7,6 +7,7 @@ import pytest
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 
+from taiji2_runtime.bag import bulk_read
 from taiji2_runtime.bag.bulk_decode import decode_messages, encode_messages, flatten_type
 from taiji2_runtime.bag.bulk_read import RawPiece, read_raw_messages
 from taiji2_runtime.bag.reading import open_reader
@@ -117,9 +118,13 @@ def test_read_raw_messages_equals_rosbags_reader(tmp_path, storage, compress):
         assert messages.log_time_ns.tolist() == bulk[key].log_time_ns.tolist()
 
 
-def test_sqlite3_aggregate_read_orders_ties_and_keeps_empty_topics(tmp_path):
+@pytest.mark.parametrize("parts", [1, 2, 3, 7])
+def test_sqlite3_aggregate_read_orders_ties_and_keeps_empty_topics(tmp_path, monkeypatch, parts):
     """sqlite3: messages of equal stamps stay in insertion (id) order, rows interleaved across topics
-    are separated, a topic without messages is listed empty; bytes as rosbags reads them."""
+    are separated, a topic without messages is listed empty; bytes as rosbags reads them. The same
+    whatever the number of id ranges the table scan is split into (as many as the machine has cores),
+    ties and descending stamps straddling the ranges' borders included."""
+    monkeypatch.setattr(bulk_read, "_SQLITE_PARTS", parts)
     store = typestore()
     bag = tmp_path / "bag"
     writer = Writer(bag, version=9, storage_plugin=StoragePlugin.SQLITE3)

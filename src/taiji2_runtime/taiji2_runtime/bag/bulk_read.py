@@ -2,9 +2,9 @@
 
 MCAP: every chunk is read once (decompressed when needed, checksum verified) and the messages of
 each channel are located from the chunk's message-index records with numpy. sqlite3: one table
-scan, each topic's rows aggregated inside SQLite. Anything unusual (an MCAP file without chunk or
-message indexes, a storage this module does not know) falls back to iterating rosbags' reader, so
-the result is the same for every bag rosbags opens, only slower.
+scan (id ranges read concurrently), each topic's rows aggregated inside SQLite. Anything unusual
+(an MCAP file without chunk or message indexes, a storage this module does not know) falls back
+to iterating rosbags' reader, so the result is the same for every bag rosbags opens, only slower.
 
 The result per ``(topic, type)`` is a :class:`RawMessages`: receive stamps and the byte ranges of
 each serialised message (4-byte CDR encapsulation header included) in one or more byte buffers.
@@ -13,13 +13,17 @@ each serialised message (4-byte CDR encapsulation header included) in one or mor
 from __future__ import annotations
 
 import gc
+import itertools
+import os
 import struct
 import zlib
 from collections.abc import Collection, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import apsw
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from rosbags.rosbag2 import Reader
@@ -213,6 +217,8 @@ def _read_mcap(storage: McapReader, path: Path, wanted: dict[int, Key], with_dat
 
 #: most topics read by one sqlite3 query (4 aggregate columns each; SQLite's column limit is 2000)
 _SQLITE_TOPICS_PER_QUERY = 100
+#: the table scan is split into this many id ranges, read concurrently (SQLite runs without the GIL)
+_SQLITE_PARTS = max(1, min(4, os.cpu_count() or 1))
 
 
 def _sqlite_integers(text: str | None) -> np.ndarray:
@@ -222,6 +228,28 @@ def _sqlite_integers(text: str | None) -> np.ndarray:
     return np.fromstring(text, dtype=np.int64, sep=",")
 
 
+def _sqlite_aggregate_query(topic_ids: list[int], with_data: bool) -> str:
+    """One row: per topic, its ids, stamps and data lengths as text and its data as one blob."""
+    columns = []
+    for tid in topic_ids:
+        columns += [f"group_concat(CASE topic_id WHEN {tid} THEN id END, ',')",
+                    f"group_concat(CASE topic_id WHEN {tid} THEN timestamp END, ',')"]
+        if with_data:
+            columns += [f"group_concat(CASE topic_id WHEN {tid} THEN length(data) END, ',')",
+                        f"CAST(group_concat(CASE topic_id WHEN {tid} THEN data END, x'') AS BLOB)"]
+    return f"SELECT {', '.join(columns)} FROM messages WHERE id BETWEEN ? AND ?"
+
+
+def _sqlite_read_range(path: str, query: str, first_id: int, last_id: int) -> tuple:
+    """``query`` over the rows with ids in [first_id, last_id], on a connection of its own (read-only,
+    immutable, as rosbags opens the file), so that the ranges are read concurrently."""
+    db = apsw.Connection(f"file:{path}?immutable=1", flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
+    try:
+        return db.execute(query, (first_id, last_id)).fetchone()
+    finally:
+        db.close()
+
+
 def _read_sqlite(storage: Sqlite3Reader, wanted: set[Key], with_data: bool,
                  parts: dict[Key, _Partial]) -> None:
     """Every wanted topic in one table scan, its rows aggregated inside SQLite.
@@ -229,50 +257,60 @@ def _read_sqlite(storage: Sqlite3Reader, wanted: set[Key], with_data: bool,
     Per topic, SQLite concatenates the ids, stamps and data lengths as text and the data as one
     blob (``group_concat`` skips the NULLs of the other topics' rows), so no Python object is made
     per message; numpy then orders the messages by (timestamp, id), the order of rosbags' reader.
-    A value that is not an integer where one belongs, or a topic whose data exceed SQLite's
-    largest blob, leaves the fast path (the generic iteration reads the same rows).
+    The scan is split into id ranges read concurrently, one connection each. A value that is not an
+    integer where one belongs, or a topic whose data exceed SQLite's largest blob, leaves the fast
+    path (the generic iteration reads the same rows).
     """
     db = storage.dbconn
     if db is None:
         raise _FastPathUnavailable("sqlite3 storage not open")
     ids = {int(tid): (name, mtype) for tid, name, mtype in db.execute("SELECT id, name, type FROM topics")
            if (name, mtype) in wanted}
+    first_id, last_id = db.execute("SELECT min(id), max(id) FROM messages").fetchone()
+    if first_id is None or not ids:
+        return
+    bounds = np.linspace(int(first_id) - 1, int(last_id), _SQLITE_PARTS + 1).astype(np.int64)
+    ranges = [(int(lo) + 1, int(hi)) for lo, hi in itertools.pairwise(bounds) if hi > lo]
     topic_ids = sorted(ids)
-    for first in range(0, len(topic_ids), _SQLITE_TOPICS_PER_QUERY):
-        batch = topic_ids[first:first + _SQLITE_TOPICS_PER_QUERY]
-        columns = []
-        for tid in batch:
-            columns += [f"group_concat(CASE topic_id WHEN {tid} THEN id END, ',')",
-                        f"group_concat(CASE topic_id WHEN {tid} THEN timestamp END, ',')"]
-            if with_data:
-                columns += [f"group_concat(CASE topic_id WHEN {tid} THEN length(data) END, ',')",
-                            f"CAST(group_concat(CASE topic_id WHEN {tid} THEN data END, x'') AS BLOB)"]
-        try:
-            row = db.execute(f"SELECT {', '.join(columns)} FROM messages").fetchone()
-        except Exception as exc:  # apsw.TooBigError: a topic's data beyond SQLite's largest blob
-            raise _FastPathUnavailable(f"sqlite3 aggregate: {exc}") from exc
-        width = 4 if with_data else 2
-        for position, tid in enumerate(batch):
-            cells = row[position * width:(position + 1) * width]
+    width = 4 if with_data else 2
+    with ThreadPoolExecutor(max_workers=len(ranges)) as pool:
+        for first in range(0, len(topic_ids), _SQLITE_TOPICS_PER_QUERY):
+            batch = topic_ids[first:first + _SQLITE_TOPICS_PER_QUERY]
+            query = _sqlite_aggregate_query(batch, with_data)
             try:
-                row_ids, stamps = _sqlite_integers(cells[0]), _sqlite_integers(cells[1])
-                lengths = _sqlite_integers(cells[2]) if with_data else None
-            except ValueError as exc:  # a non-integer stamp: let rosbags read it as it can
-                raise _FastPathUnavailable(f"sqlite3 column: {exc}") from exc
-            if not stamps.size:
-                continue
-            if stamps.size != row_ids.size or (lengths is not None and lengths.size != stamps.size):
-                raise _FastPathUnavailable("sqlite3 aggregates of unequal length")
-            order = np.lexsort((row_ids, stamps))
-            part = parts.setdefault(ids[tid], _Partial())
-            part.times.append(stamps[order])
-            if lengths is not None:
-                blob = np.frombuffer(cells[3] or b"", dtype=np.uint8)
-                if int(lengths.sum()) != blob.shape[0]:
-                    raise _FastPathUnavailable("sqlite3 data of another length than length(data)")
-                offsets = np.zeros_like(lengths)
-                np.cumsum(lengths[:-1], out=offsets[1:])
-                part.pieces.append(RawPiece(blob, offsets[order], lengths[order]))
+                rows = list(pool.map(lambda r, q=query: _sqlite_read_range(str(storage.path), q, *r), ranges))
+            except Exception as exc:  # apsw.TooBigError: a topic's data beyond SQLite's largest blob
+                raise _FastPathUnavailable(f"sqlite3 aggregate: {exc}") from exc
+            for position, tid in enumerate(batch):
+                _sqlite_topic(ids[tid], [row[position * width:(position + 1) * width] for row in rows], with_data,
+                              parts)
+
+
+def _sqlite_topic(key: Key, cells_per_range: list[tuple], with_data: bool, parts: dict[Key, _Partial]) -> None:
+    """One topic's aggregates of every id range -> its stamps and messages in bag order."""
+    try:
+        row_ids = np.concatenate([_sqlite_integers(cells[0]) for cells in cells_per_range])
+        stamps = np.concatenate([_sqlite_integers(cells[1]) for cells in cells_per_range])
+        lengths = np.concatenate([_sqlite_integers(cells[2]) for cells in cells_per_range]) if with_data else None
+    except ValueError as exc:  # a non-integer stamp: let rosbags read it as it can
+        raise _FastPathUnavailable(f"sqlite3 column: {exc}") from exc
+    if not stamps.size:
+        return
+    if stamps.size != row_ids.size or (lengths is not None and lengths.size != stamps.size):
+        raise _FastPathUnavailable("sqlite3 aggregates of unequal length")
+    order = np.lexsort((row_ids, stamps))
+    part = parts.setdefault(key, _Partial())
+    part.times.append(stamps[order])
+    if lengths is None:
+        return
+    blobs = [cells[3] for cells in cells_per_range if cells[3]]
+    blob = np.frombuffer(blobs[0], dtype=np.uint8) if len(blobs) == 1 else \
+        np.concatenate([np.frombuffer(b, dtype=np.uint8) for b in blobs])
+    if int(lengths.sum()) != blob.shape[0]:
+        raise _FastPathUnavailable("sqlite3 data of another length than length(data)")
+    offsets = np.zeros_like(lengths)
+    np.cumsum(lengths[:-1], out=offsets[1:])
+    part.pieces.append(RawPiece(blob, offsets[order], lengths[order]))
 
 
 def _read_generic(reader: Reader, keys: Collection[Key], with_data: bool) -> dict[Key, _Partial]:
