@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import time
 
 import numpy as np
 import pytest
@@ -81,8 +82,96 @@ def test_structural_problems_are_counted_per_topic(tmp_path):
     assert set(cmd.found_types) == {CMD, "geometry_msgs/msg/Vector3Stamped"}
 
 
+def _contract_bag_sqlite3_in_segments(path):
+    """Our own writer, sqlite3, custom data, several files, a wrong type and messages of its own."""
+    from taiji2_runtime.bag.writer import BagWriter
+    from taiji2_runtime.interfaces import typestore
+
+    store = typestore()
+    writer = BagWriter(path, store, storage="sqlite3")
+    writer.set_custom_data("taiji2.seed", "11")
+    handles = {t: writer.add_topic(t, mt) for t, mt in TOPICS.items()}
+    wrong = writer.add_topic("/taiji2/maneuver/command", "geometry_msgs/msg/Vector3Stamped")
+    rng = np.random.default_rng(2)
+    for k in range(60):
+        ns = k * 100_000_000
+        if k in (20, 40):  # a segment's wall-time period is over: three storage files
+            writer.poll(time.monotonic() + 3600.0)
+        st = encode_messages(store, ST, {"header.stamp.sec": k, "header.frame_id": "crf", "attitude.w": 1.0}, 1)[0]
+        writer.write(handles["/taiji2/star_tracker"], ns, st[:30] if k == 7 else st)
+        for i, topic in enumerate(("/taiji2/grs1/voltages", "/taiji2/grs2/voltages")):
+            writer.write(handles[topic], ns, encode_messages(store, GRS, {
+                "header.stamp.sec": k, "header.frame_id": f"tmrf{i + 1}", "grs_id": i + 1,
+                "vx1": float(rng.normal())}, 1)[0])
+        if k % 10 == 0:
+            writer.write(handles["/taiji2/maneuver/command"], ns, encode_messages(
+                store, CMD, {"header.stamp.sec": k, "header.frame_id": "crf"}, 1)[0])
+    writer.write(wrong, 99, encode_messages(store, "geometry_msgs/msg/Vector3Stamped", {"header.frame_id": "crf"},
+                                            1)[0])
+    writer.close()
+
+
+def _humble_era_sqlite3(path):
+    """rosbags' writer, made into what rosbag2 on Humble writes: metadata version 5, sqlite3 schema 3,
+    no type hashes and no embedded message definitions."""
+    import sqlite3
+
+    import yaml
+
+    write_ground_segment_bag(path, "sqlite3")
+    with sqlite3.connect(next(path.glob("*.db3"))) as db:
+        db.execute("UPDATE schema SET schema_version = 3")
+        db.execute("DROP TABLE message_definitions")
+    meta = yaml.safe_load((path / "metadata.yaml").read_text())
+    info = meta["rosbag2_bagfile_information"]
+    info["version"] = 5
+    for entry in info["topics_with_message_count"]:
+        entry["topic_metadata"].pop("type_description_hash", None)
+    (path / "metadata.yaml").write_text(yaml.safe_dump(meta))
+
+
+def _assert_same_experiment(a, b):
+    assert (a.storage, a.custom_data, a.report_lines()) == (b.storage, b.custom_data, b.report_lines())
+    for name in ("star_tracker", "grs1", "grs2", "commands"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert (x is None) == (y is None), name
+        for field_name, value in ({} if x is None else vars(x)).items():
+            if isinstance(value, np.ndarray):
+                np.testing.assert_array_equal(value, getattr(y, field_name), err_msg=f"{name}.{field_name}")
+            else:
+                assert value == getattr(y, field_name), (name, field_name)
+
+
+@pytest.mark.parametrize("make", [
+    lambda p: write_ground_segment_bag(p, "sqlite3"),
+    _contract_bag_sqlite3_in_segments,
+    _humble_era_sqlite3,
+])
+def test_sqlite3_direct_open_reads_as_rosbags_reader(tmp_path, monkeypatch, make):
+    """A sqlite3 directory bag is read without rosbags' Reader (no per-topic count scan on opening):
+    the same arrays, reports, storage and custom data as through rosbags' Reader, for rosbags' own
+    writer (version 8, and made into a Humble-era bag) and ours (several files, custom data, a wrong
+    type, an undecodable message)."""
+    from taiji2_estimator_pkg.io import raw_bag
+    from taiji2_runtime.bag.sqlite3_direct import open_sqlite3_bag
+
+    bag = tmp_path / "bag"
+    make(bag)
+    opened = open_sqlite3_bag(bag)
+    assert opened is not None and opened.files, "the direct path was not taken"
+    assert make is not _contract_bag_sqlite3_in_segments or len(opened.files) == 3, opened.files
+    direct = load_raw_bag(bag)
+    monkeypatch.setattr(raw_bag, "open_sqlite3_bag", lambda _bag: None)
+    _assert_same_experiment(direct, load_raw_bag(bag))
+
+
 def _truncate(bag):
     target = next(bag.glob("*.mcap"))
+    target.write_bytes(target.read_bytes()[: target.stat().st_size // 2])
+
+
+def _truncate_sqlite(bag):
+    target = next(bag.glob("*.db3"))
     target.write_bytes(target.read_bytes()[: target.stat().st_size // 2])
 
 
@@ -96,7 +185,7 @@ def _random_sqlite(bag):
     target.write_bytes(np.random.default_rng(0).bytes(target.stat().st_size))
 
 
-def _different_definition(path):
+def _different_definition(path, storage="mcap"):
     """A bag whose embedded StarTracker definition is not the contract's (an extra field first)."""
     store = get_typestore(Stores.ROS2_HUMBLE)
     text = "uint32 sequence\n" + (REPO / "src/taiji2_msgs/msg/StarTracker.msg").read_text()
@@ -104,7 +193,8 @@ def _different_definition(path):
     for name in ("GrsVoltages",):
         store.register(get_types_from_msg((REPO / f"src/taiji2_msgs/msg/{name}.msg").read_text(),
                                           f"taiji2_msgs/msg/{name}"))
-    with Writer(path, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with Writer(path, version=8, storage_plugin=plugin) as writer:
         for topic, msgtype in TOPICS.items():
             conn = writer.add_connection(topic, msgtype, typestore=store)
             writer.write(conn, 1, store.serialize_cdr(_default(store, msgtype), msgtype))
@@ -146,6 +236,15 @@ BAD_BAGS = {
             p, overrides={"/taiji2/star_tracker": "geometry_msgs/msg/QuaternionStamped"}),
         "has type geometry_msgs/msg/QuaternionStamped, expected taiji2_msgs/msg/StarTracker"),
     "different embedded definition": (_different_definition, "differs from the installed one"),
+    # sqlite3 directory bags are read without rosbags' Reader while they are sound: when they are not,
+    # the errors are rosbags' as for any other bag
+    "truncated sqlite3": (lambda p: (write_ground_segment_bag(p, "sqlite3"), _truncate_sqlite(p)), "corrupt"),
+    "missing grs2 topic sqlite3": (lambda p: write_ground_segment_bag(p, "sqlite3", skip=("/taiji2/grs2/voltages",)),
+                                   "missing raw topic /taiji2/grs2/voltages"),
+    "different embedded definition sqlite3": (lambda p: _different_definition(p, "sqlite3"),
+                                              "differs from the installed one"),
+    "sqlite3 file missing": (lambda p: (write_ground_segment_bag(p, "sqlite3"), next(p.glob("*.db3")).unlink()),
+                             "missing"),
 }
 
 

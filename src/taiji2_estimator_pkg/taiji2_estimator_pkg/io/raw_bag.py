@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from taiji2_runtime.bag.bulk_decode import decode_messages
-from taiji2_runtime.bag.bulk_read import RawMessages, read_raw_messages
+from taiji2_runtime.bag.bulk_read import Key, RawMessages, read_raw_messages, read_sqlite3_bag
 from taiji2_runtime.bag.contract import (
     COMMAND_TOPIC,
     GRS_IDS,
@@ -35,7 +35,8 @@ from taiji2_runtime.bag.contract import (
     STAR_TRACKER_TOPIC,
 )
 from taiji2_runtime.bag.errors import BagError
-from taiji2_runtime.bag.reading import check_types, custom_data, open_reader, storage_identifier
+from taiji2_runtime.bag.reading import TypeCheck, check_types, custom_data, open_reader, storage_identifier
+from taiji2_runtime.bag.sqlite3_direct import open_sqlite3_bag
 from taiji2_runtime.typestore import contract_typestore
 
 __all__ = ["CommandData", "GrsData", "RawBagError", "RawExperiment", "StarTrackerData", "TopicReport",
@@ -299,6 +300,33 @@ def _commands(c: dict[str, np.ndarray]) -> CommandData:
     return CommandData(c["stamp_ns"], c["receive_ns"].astype(np.int64), c["stamp_ns"] / _NS, torque, force)
 
 
+def _read_raw_topics(bag: Path) -> tuple[str, dict[str, str], dict[str, TypeCheck], dict[Key, RawMessages]]:
+    """Storage id, custom data, type checks and raw messages of the raw topics of ``bag``.
+
+    A plain sqlite3 directory bag is read directly (without rosbags' per-topic count scan on
+    opening); if that fails in any way, or for any other bag, through rosbags' ``Reader``, whose
+    errors become :class:`RawBagError`.
+    """
+    direct = open_sqlite3_bag(bag) if bag.is_dir() else None
+    if direct is not None:
+        try:
+            connections = [c for c in direct.connections if c.topic in RAW_TOPICS]
+            raw = read_sqlite3_bag(direct, topics=set(RAW_TOPICS))
+            return "sqlite3", direct.custom_data, check_types(connections, contract_typestore()), raw
+        except Exception:  # the storage is damaged or unusual: rosbags reads it or names the problem
+            pass
+    try:
+        with open_reader(bag) as reader:
+            connections = [c for c in reader.connections if c.topic in RAW_TOPICS]
+            checks = check_types(connections, contract_typestore())
+            raw = read_raw_messages(reader, topics=set(RAW_TOPICS))
+            return storage_identifier(reader), custom_data(reader), checks, raw
+    except RawBagError:
+        raise
+    except BagError as exc:
+        raise RawBagError(exc.path, exc.problem) from exc
+
+
 def load_raw_bag(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPICS)) -> RawExperiment:
     """Load the raw topics of the experiment bag at ``path``.
 
@@ -326,17 +354,7 @@ def load_raw_bag(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPICS
     unknown = [t for t in required if t not in RAW_TOPICS]
     if unknown:
         raise ValueError(f"not raw-contract topics: {', '.join(unknown)}")
-    try:
-        with open_reader(bag) as reader:
-            storage = storage_identifier(reader)
-            custom = custom_data(reader)
-            connections = [c for c in reader.connections if c.topic in RAW_TOPICS]
-            checks = check_types(connections, contract_typestore())
-            raw = read_raw_messages(reader, topics=set(RAW_TOPICS))
-    except RawBagError:
-        raise
-    except BagError as exc:
-        raise RawBagError(exc.path, exc.problem) from exc
+    storage, custom, checks, raw = _read_raw_topics(bag)
     reports = {topic: TopicReport(topic, msgtype) for topic, msgtype in RAW_TOPICS.items()}
     usable: dict[str, list[RawMessages]] = {}
     for (topic, msgtype), messages in raw.items():

@@ -23,7 +23,6 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import apsw
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from rosbags.rosbag2 import Reader
@@ -32,6 +31,7 @@ from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from .errors import BagError
 from .reading import describe_error, storages_of
+from .sqlite3_direct import Sqlite3Bag, connect
 
 _MESSAGE_OP = 0x05
 _CHUNK_HEADER = 9 + 8 + 8 + 8 + 4 + 4  # op, length, start, end, uncompressed size, crc, compression length
@@ -240,18 +240,17 @@ def _sqlite_aggregate_query(topic_ids: list[int], with_data: bool) -> str:
     return f"SELECT {', '.join(columns)} FROM messages WHERE id BETWEEN ? AND ?"
 
 
-def _sqlite_read_range(path: str, query: str, first_id: int, last_id: int) -> tuple:
+def _sqlite_read_range(path: Path, query: str, first_id: int, last_id: int) -> tuple:
     """``query`` over the rows with ids in [first_id, last_id], on a connection of its own (read-only,
     immutable, as rosbags opens the file), so that the ranges are read concurrently."""
-    db = apsw.Connection(f"file:{path}?immutable=1", flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
+    db = connect(path)
     try:
         return db.execute(query, (first_id, last_id)).fetchone()
     finally:
         db.close()
 
 
-def _read_sqlite(storage: Sqlite3Reader, wanted: set[Key], with_data: bool,
-                 parts: dict[Key, _Partial]) -> None:
+def _read_sqlite(path: Path, wanted: set[Key], with_data: bool, parts: dict[Key, _Partial]) -> None:
     """Every wanted topic in one table scan, its rows aggregated inside SQLite.
 
     Per topic, SQLite concatenates the ids, stamps and data lengths as text and the data as one
@@ -261,12 +260,13 @@ def _read_sqlite(storage: Sqlite3Reader, wanted: set[Key], with_data: bool,
     integer where one belongs, or a topic whose data exceed SQLite's largest blob, leaves the fast
     path (the generic iteration reads the same rows).
     """
-    db = storage.dbconn
-    if db is None:
-        raise _FastPathUnavailable("sqlite3 storage not open")
-    ids = {int(tid): (name, mtype) for tid, name, mtype in db.execute("SELECT id, name, type FROM topics")
-           if (name, mtype) in wanted}
-    first_id, last_id = db.execute("SELECT min(id), max(id) FROM messages").fetchone()
+    db = connect(path)
+    try:
+        ids = {int(tid): (name, mtype) for tid, name, mtype in db.execute("SELECT id, name, type FROM topics")
+               if (name, mtype) in wanted}
+        first_id, last_id = db.execute("SELECT min(id), max(id) FROM messages").fetchone()
+    finally:
+        db.close()
     if first_id is None or not ids:
         return
     bounds = np.linspace(int(first_id) - 1, int(last_id), _SQLITE_PARTS + 1).astype(np.int64)
@@ -278,7 +278,7 @@ def _read_sqlite(storage: Sqlite3Reader, wanted: set[Key], with_data: bool,
             batch = topic_ids[first:first + _SQLITE_TOPICS_PER_QUERY]
             query = _sqlite_aggregate_query(batch, with_data)
             try:
-                rows = list(pool.map(lambda r, q=query: _sqlite_read_range(str(storage.path), q, *r), ranges))
+                rows = list(pool.map(lambda r, q=query: _sqlite_read_range(path, q, *r), ranges))
             except Exception as exc:  # apsw.TooBigError: a topic's data beyond SQLite's largest blob
                 raise _FastPathUnavailable(f"sqlite3 aggregate: {exc}") from exc
             for position, tid in enumerate(batch):
@@ -354,7 +354,7 @@ def _read_fast_storages(reader: Reader, keys: list[Key], with_data: bool) -> dic
                 if wanted:
                     _read_mcap(storage, Path(str(storage.path)), wanted, with_data, parts)
             elif isinstance(storage, Sqlite3Reader):
-                _read_sqlite(storage, set(keys), with_data, parts)
+                _read_sqlite(Path(str(storage.path)), set(keys), with_data, parts)
             else:
                 raise _FastPathUnavailable(type(storage).__name__)
     return parts
@@ -396,6 +396,28 @@ def read_raw_messages(reader: Reader, topics: Collection[str] | None = None, *,
         raise
     except Exception as exc:  # struct, numpy, apsw, decompression: the storage is damaged
         raise BagError(bag_path, describe_error(exc)) from exc
+    return _assemble(keys, parts)
+
+
+def read_sqlite3_bag(bag: Sqlite3Bag, topics: Collection[str] | None = None, *,
+                     with_data: bool = True) -> dict[Key, RawMessages]:
+    """:func:`read_raw_messages` of a bag opened by :func:`~taiji2_runtime.bag.sqlite3_direct.open_sqlite3_bag`.
+
+    Raises
+    ------
+    Exception
+        Whatever the storage raises (apsw's errors, a non-integer stamp): the caller then reads
+        the bag through rosbags' ``Reader``, which words the problem.
+    """
+    keys = sorted({(c.topic, c.msgtype) for c in bag.connections if topics is None or c.topic in topics})
+    parts: dict[Key, _Partial] = {}
+    with _gc_paused():
+        for path in bag.files:
+            _read_sqlite(path, set(keys), with_data, parts)
+    return _assemble(keys, parts)
+
+
+def _assemble(keys: list[Key], parts: dict[Key, _Partial]) -> dict[Key, RawMessages]:
     result: dict[Key, RawMessages] = {}
     for key in keys:
         part = parts.get(key, _Partial())
