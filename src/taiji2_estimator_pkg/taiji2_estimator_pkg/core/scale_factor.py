@@ -851,9 +851,15 @@ class _EpochArrays:
         st_ok = checked.star_tracker_ok[rows]
         phi = np.where(st_ok[:, None], phi_all[rows], 0.0)
         grs_ok = checked.grs_ok[rows]
-        finite_volts = np.where(np.isfinite(volts[rows]), volts[rows], 0.0)
-        diffs = np.where(grs_ok[:, :, None], angular_differences(finite_volts), 0.0)
-        sums = np.where(grs_ok[:, :, None], linear_sums(finite_volts), 0.0)
+        # every row usable (the common case): no copy of the voltages
+        usable_volts = volts if rows.size == volts.shape[0] else volts[rows]
+        finite = np.isfinite(usable_volts)
+        if not finite.all():
+            usable_volts = np.where(finite, usable_volts, 0.0)
+        diffs, sums = angular_differences(usable_volts), linear_sums(usable_volts)
+        if not grs_ok.all():  # a GRS sample rejected: no information from it
+            diffs[~grs_ok] = 0.0
+            sums[~grs_ok] = 0.0
         return cls(index, t[rows], t0, st_ok, grs_ok, phi, diffs, sums, last_quat, last_phi)
 
 
