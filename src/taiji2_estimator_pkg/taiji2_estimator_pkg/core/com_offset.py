@@ -412,12 +412,12 @@ class ComOffsetModel:
             omega_dot += np.where((mine & both)[:, None], fused, np.where(mine[:, None], alone, 0.0))
             lin = self.ratio * gi[list(LINEAR_FROM_ANGULAR)]
             z[:, 3 * i:3 * i + 3] = (sums[:, i, :] * lin[None, :]) @ self.c[grs]
-        w = cross_matrix(omega)
-        a_tilde = cross_matrix(omega_dot) + w @ w
         col = self.n_d
         for i in range(self.n_grs):
             rows = slice(3 * i, 3 * i + 3)
-            z[:, rows] -= a_tilde @ beta[3 * i:3 * i + 3]
+            # A~ d = omega_dot x d + omega x (omega x d), A~ = [omega_dot x] + [omega x]^2
+            d = np.broadcast_to(beta[3 * i:3 * i + 3], omega.shape)
+            z[:, rows] -= np.cross(omega_dot, d) + np.cross(omega, np.cross(omega, d))
             if self.options.detrend in ("linear", "constant"):
                 z[:, rows] -= beta[col + 3 * i:col + 3 * i + 3][None, :]
         if self.options.detrend in ("linear", "constant"):

@@ -76,9 +76,11 @@ def first_order_recursion(lam: complex, drive: np.ndarray, initial: np.ndarray,
     if magnitude == 0.0:
         return drive.astype(dtype, copy=True)
     decay = -np.log(magnitude) if magnitude < 1.0 else 0.0
-    block = length if decay == 0.0 else int(max(1, min(length, np.log(_BLOCK_GROWTH) // decay)))
+    longest = length if decay == 0.0 else int(max(1, min(length, np.log(_BLOCK_GROWTH) // decay)))
+    # blocks of equal length, none longer than the bound: no padding beyond the last few samples
+    n_blocks = -(-length // longest)
+    block = -(-length // n_blocks)
     tail = drive.shape[1:]
-    n_blocks = -(-length // block)
     inverse, forward = _block_scales(lam, block)
     shape = (1, block) + (1,) * len(tail)
     work = np.empty((n_blocks, block, *tail), dtype=dtype)

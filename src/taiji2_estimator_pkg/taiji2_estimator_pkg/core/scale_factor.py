@@ -323,10 +323,24 @@ class ScaleFactorModel:
             out[:, :, 3 * block:3 * block + 3] = matrix[None, :, :] * differences[:, block, None, :]
         return out
 
+    def input_batch(self, differences: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """(L, 3) known inputs ``U_k g`` of regular steps (:meth:`input_regressor_batch` times ``g``,
+        without forming the regressors), differences (L, n_grs, 3)."""
+        out = np.zeros((differences.shape[0], 3))
+        for block, grs in enumerate(self.grs_ids):
+            matrix = self.to_model @ self.weights[grs] @ self.c[grs].T
+            out += (differences[:, block, :] * g[3 * block:3 * block + 3]) @ matrix.T
+        return out
+
     def difference_row(self, differences_1: np.ndarray, differences_2: np.ndarray) -> np.ndarray:
         """(3, 6) ``D`` of one epoch (see :meth:`difference_regressor`)."""
         g1, g2 = self.grs_ids
         return np.hstack((self.c[g1].T * differences_1[None, :], -self.c[g2].T * differences_2[None, :]))
+
+    def difference_residual(self, differences: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """(..., 3) ``D g`` (:meth:`difference_regressor` times ``g``, without forming ``D``)."""
+        g1, g2 = self.grs_ids
+        return (differences[..., 0, :] * g[0:3]) @ self.c[g1] - (differences[..., 1, :] * g[3:6]) @ self.c[g2]
 
     def difference_regressor(self, differences: np.ndarray) -> np.ndarray:
         """(..., 3, 6) ``D = [C_1^T diag(u_1), -C_2^T diag(u_2)]`` (CRF), differences (..., 2, 3)."""
@@ -740,7 +754,7 @@ class ScaleFactorEstimator:
                     else:
                         self.filter.x = theta[p:].copy()
             elif kind == "regular":
-                u0 = model.input_regressor_batch(epochs.diffs[start:stop]) @ g_hat
+                u0 = model.input_batch(epochs.diffs[start:stop], g_hat)
                 out = self.filter.run_regular(y_all[start:stop], None, u0, None, want_states=True)
                 nis_st[start:stop] = out.nis
                 states[start:stop] = out.states
@@ -767,7 +781,7 @@ class ScaleFactorEstimator:
         nis_pair = np.zeros(epochs.count)
         if len(self.grs_ids) == 2:
             both = np.all(epochs.grs_ok, axis=1)
-            resid = model.difference_regressor(epochs.diffs[both]) @ g_hat
+            resid = model.difference_residual(epochs.diffs[both], g_hat)
             # r^T W r = |L^T r|^2
             nis_pair[both] = np.sum((resid @ model.w_diff_chol) ** 2, axis=1)
         return nis_st, nis_pair, states
