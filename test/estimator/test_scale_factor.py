@@ -111,3 +111,20 @@ def test_paper_filter_recursive_equals_bulk():
     assert est.n_samples == bulk.n_samples == len(out) - 200
     np.testing.assert_allclose(est.values, bulk.values, rtol=1e-9)
     np.testing.assert_allclose(est.covariance, bulk.covariance, rtol=1e-7, atol=1e-9 * np.max(bulk.covariance))
+
+
+def test_bulk_input_forms_equal_the_per_step_regressor():
+    """The bulk paths' factored input regressors and their products with G (``U g``, ``D g``) equal
+    the per-step regressors (to rounding: a few ulps of values of order 1)."""
+    estimator = ScaleFactorEstimator(InstrumentModel.from_layout("type1"), (1, 2))
+    model = estimator.model
+    rng = np.random.default_rng(8)
+    diffs = rng.normal(size=(50, 2, 3))
+    g = rng.normal(size=6)
+    dense = model.input_regressor_factors(diffs).dense()
+    for k in range(diffs.shape[0]):
+        per_step = model.input_regressor({1: diffs[k, 0], 2: diffs[k, 1]}, (1, 2))
+        np.testing.assert_allclose(dense[k], per_step, rtol=0, atol=1e-14 * np.abs(per_step).max())
+        np.testing.assert_allclose(model.input_batch(diffs, g)[k], per_step @ g, rtol=1e-12, atol=1e-14)
+        row = model.difference_row(diffs[k, 0], diffs[k, 1])
+        np.testing.assert_allclose(model.difference_residual(diffs, g)[k], row @ g, rtol=1e-12, atol=1e-14)

@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike
 
 from .attitude import AttitudeIntegrator, SmoothingDerivative, integrate_attitude
 from .estimate_blocks import PerGrsBlocks
+from .factored_steady import RegressorFactors
 from .instrument import InstrumentModel, angular_differences, linear_sums
 from .kalman import KalmanFilter, chi2_gate
 from .twostage import StateSpaceModel, TwoStageFilter, solve_information
@@ -315,16 +316,20 @@ class ScaleFactorModel:
                 out[:, 3 * block:3 * block + 3] = self.to_model @ weights[g] @ self.c[g].T * differences[g][None, :]
         return out
 
-    def input_regressor_batch(self, differences: np.ndarray) -> np.ndarray:
-        """(L, 3, 3 n_grs) regressors of regular steps (all GRS present), differences (L, n_grs, 3)."""
-        out = np.empty((differences.shape[0], 3, self.n_params))
-        for block, g in enumerate(self.grs_ids):
-            matrix = self.to_model @ self.weights[g] @ self.c[g].T
-            out[:, :, 3 * block:3 * block + 3] = matrix[None, :, :] * differences[:, block, None, :]
-        return out
+    def input_regressor_factors(self, differences: np.ndarray) -> RegressorFactors:
+        """(L, 3, 3 n_grs) regressors of regular steps (all GRS present, :meth:`input_regressor` of each)
+        as factors: the series are U~ (L, 3 n_grs) of differences (L, n_grs, 3), the patterns
+        ``M_g[:, c] e_j^T`` with ``M_g = T W_g C_g^T`` (j = 3 block + c)."""
+        n_series = 3 * len(self.grs_ids)
+        patterns = np.zeros((n_series, 3, self.n_params))
+        for block, grs in enumerate(self.grs_ids):
+            matrix = self.to_model @ self.weights[grs] @ self.c[grs].T
+            for c in range(3):
+                patterns[3 * block + c, :, 3 * block + c] = matrix[:, c]
+        return RegressorFactors(differences.reshape(differences.shape[0], n_series), patterns)
 
     def input_batch(self, differences: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """(L, 3) known inputs ``U_k g`` of regular steps (:meth:`input_regressor_batch` times ``g``,
+        """(L, 3) known inputs ``U_k g`` of regular steps (:meth:`input_regressor_factors` times ``g``,
         without forming the regressors), differences (L, n_grs, 3)."""
         out = np.zeros((differences.shape[0], 3))
         for block, grs in enumerate(self.grs_ids):
@@ -670,7 +675,7 @@ class ScaleFactorEstimator:
                 self._bridge(stop)
             elif kind == "regular":
                 fresh = self.filter.fresh
-                u_reg = model.input_regressor_batch(epochs.diffs[start:stop])
+                u_reg = model.input_regressor_factors(epochs.diffs[start:stop])
                 self.filter.run_regular(y_all[start:stop], None, None, u_reg)
                 self.st_correction_sum += (stop - start - int(fresh)) * self.st_correction[self.grs_ids]
             else:

@@ -613,7 +613,8 @@ class TwoStageFilter:
         if not isinstance(x_reg, RegressorFactors):
             x_reg = None if x_reg is None else np.asarray(x_reg, dtype=np.float64)
         u0 = None if u0 is None else np.asarray(u0, dtype=np.float64)
-        u_reg = None if u_reg is None else np.asarray(u_reg, dtype=np.float64)
+        if not isinstance(u_reg, RegressorFactors):
+            u_reg = None if u_reg is None else np.asarray(u_reg, dtype=np.float64)
         parts: list[RegularRunOutput] = []
         start = 0
         while start < y.shape[0]:
@@ -623,8 +624,9 @@ class TwoStageFilter:
                 break
             if self.steady:
                 stop = y.shape[0]
+                u_rows = u_reg.rows(start, stop) if isinstance(u_reg, RegressorFactors) else _rows(u_reg, start, stop)
                 parts.append(self._run_steady(y[start:], _rows(x_reg, start, stop), _rows(u0, start, stop),
-                                              _rows(u_reg, start, stop), want_states, want_innovations))
+                                              u_rows, want_states, want_innovations))
             else:
                 stop = min(start + _TRANSIENT_CHUNK, y.shape[0])
                 taken = self._run_transient(y[start:stop], _rows(x_reg, start, stop), _rows(u0, start, stop),
@@ -768,8 +770,13 @@ class TwoStageFilter:
         return count
 
     def _run_steady(self, y: np.ndarray, x_reg: np.ndarray | None, u0: np.ndarray | None,
-                    u_reg: np.ndarray | None, want_states: bool, want_innovations: bool) -> RegularRunOutput:
-        """Regular samples at the steady state: time-invariant closed loop, modal recursions."""
+                    u_reg: np.ndarray | RegressorFactors | None, want_states: bool,
+                    want_innovations: bool) -> RegularRunOutput:
+        """Regular samples at the steady state: time-invariant closed loop, modal recursions.
+
+        Input regressors may come as factors ``U_k = sum_s c_k,s P_s``: their modal drive
+        ``V^-1 B U_k`` is then the few series times the constant ``V^-1 B P_s`` (one matrix product),
+        without forming the (L, n_u, p) regressors."""
         mdl = self.model
         n, m, p, qt = mdl.n, mdl.m, self.p, self.q_total
         length = y.shape[0]
@@ -790,7 +797,13 @@ class TwoStageFilter:
         v_b, v_fk, w_hv = v_inv @ mdl.b, v_inv @ fk, whiten_t @ mdl.h @ v
         xr_all = None if (x_reg is None or evaluation) else np.asarray(x_reg, dtype=np.float64)
         u0_all = None if u0 is None else np.asarray(u0, dtype=np.float64)
-        ur_all = None if (u_reg is None or evaluation) else np.asarray(u_reg, dtype=np.float64)
+        ur_all = ur_series = vb_patterns = None
+        if isinstance(u_reg, RegressorFactors) and not evaluation:
+            ur_series, ur_patterns = u_reg.series, u_reg.patterns
+            n_s = ur_patterns.shape[0]
+            vb_patterns = np.einsum("nu,sup->snp", v_b, ur_patterns).reshape(n_s, n * p)
+        elif u_reg is not None and not evaluation:
+            ur_all = np.asarray(u_reg, dtype=np.float64)
         start = 0
         while start < length:
             stop = min(start + _CHUNK, length)
@@ -812,6 +825,9 @@ class TwoStageFilter:
                 modal_drive[:, 1:, 1:1 + p] = 0.0
             if ur_all is not None:
                 modal_drive[:, 1:, 1:1 + p] += np.tensordot(v_b, ur_all[start + 1:stop], axes=([1], [1]))
+            elif ur_series is not None:
+                modal_drive[:, 1:, 1:1 + p] += np.moveaxis(
+                    (ur_series[start + 1:stop] @ vb_patterns).reshape(count - 1, n, p), 1, 0)
             first = np.empty((n, cols))
             if self.fresh:
                 first[:, 0] = self.x
@@ -826,6 +842,8 @@ class TwoStageFilter:
                     first[:, 1:] = mdl.f @ self.sens
                     if ur_all is not None:
                         first[:, 1:1 + p] += mdl.b @ ur_all[start]
+                    elif ur_series is not None:
+                        first[:, 1:1 + p] += mdl.b @ u_reg.rows(start, start + 1).dense()[0]
             w_first = v_inv @ first
             modal = np.empty((n, count, cols), dtype=dtype)
             modal[:, 0, :] = w_first
