@@ -25,13 +25,14 @@ from __future__ import annotations
 from typing import Any
 
 from .errors import BagError
-from .info import BagSummary, bag_info, format_info
-from .reading import check_bag_path, open_reader
 
 __all__ = ["BagError", "BagSummary", "PlayOptions", "Player", "RecordOptions", "Recorder", "bag_info",
            "check_bag_path", "format_info", "open_reader"]
 
-_LAZY = {"Recorder": "recorder", "RecordOptions": "recorder", "Player": "player", "PlayOptions": "player"}
+#: imported on first use: a tool imports only the modules it uses (and rosbags' readers only when it reads)
+_LAZY = {"Recorder": "recorder", "RecordOptions": "recorder", "Player": "player", "PlayOptions": "player",
+         "BagSummary": "info", "bag_info": "info", "format_info": "info", "check_bag_path": "reading",
+         "open_reader": "reading"}
 
 
 def __getattr__(name: str) -> Any:

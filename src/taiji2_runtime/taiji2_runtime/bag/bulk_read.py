@@ -22,16 +22,18 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from rosbags.rosbag2 import Reader
-from rosbags.rosbag2.storage_mcap import McapReader, decompress
-from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from .errors import BagError
 from .reading import describe_error, storages_of
 from .sqlite3_direct import Sqlite3Bag, connect
+
+if TYPE_CHECKING:  # rosbags.rosbag2 is imported where a bag is read through it (~0.04 s)
+    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2.storage_mcap import McapReader
 
 _MESSAGE_OP = 0x05
 _CHUNK_HEADER = 9 + 8 + 8 + 8 + 4 + 4  # op, length, start, end, uncompressed size, crc, compression length
@@ -163,6 +165,8 @@ def _read_mcap(storage: McapReader, path: Path, wanted: dict[int, Key], with_dat
         (crc,) = struct.unpack_from("<I", file_bytes[chunk.chunk_start_offset + 33:
                                                      chunk.chunk_start_offset + 37].tobytes())
         if with_data and chunk.compression:
+            from rosbags.rosbag2.storage_mcap import decompress
+
             try:
                 raw = decompress(file_bytes[data_start:data_end].tobytes(), chunk.compression,
                                  chunk.uncompressed_size, crc)
@@ -345,6 +349,9 @@ def _read_fast(reader: Reader, keys: list[Key], with_data: bool) -> dict[Key, _P
 
 
 def _read_fast_storages(reader: Reader, keys: list[Key], with_data: bool) -> dict[Key, _Partial]:
+    from rosbags.rosbag2.storage_mcap import McapReader
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+
     parts: dict[Key, _Partial] = {}
     with _gc_paused():
         for storage in storages_of(reader):

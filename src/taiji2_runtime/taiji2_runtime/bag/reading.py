@@ -14,19 +14,21 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 from rosbags.interfaces import Connection, MessageDefinitionFormat
-from rosbags.rosbag2 import Reader
-from rosbags.rosbag2.errors import ReaderError
-from rosbags.rosbag2.storage_mcap import McapReader
-from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from rosbags.typesys import get_types_from_idl, get_types_from_msg
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
 from .errors import BagError
+
+if TYPE_CHECKING:
+    from rosbags.rosbag2 import Reader
+
+# rosbags.rosbag2 (its readers and writer, ~0.04 s to import) is imported where a bag is opened
+# with it: reading a sqlite3 bag directly (sqlite3_direct) or only checking types does not need it
 
 _STORAGE_SUFFIXES = (".mcap", ".db3")
 
@@ -63,6 +65,8 @@ def describe_error(exc: BaseException) -> str:
     text = " ".join(str(exc).split()).rstrip(".")
     if len(text) > 120:
         text = text[:117] + "..."
+    from rosbags.rosbag2.errors import ReaderError
+
     kind = type(exc).__name__
     if isinstance(exc, ReaderError):
         return f"corrupt or truncated bag ({text})"
@@ -78,6 +82,9 @@ def describe_error(exc: BaseException) -> str:
 
 def _culprit(bag: Path) -> Path | None:
     """The first storage file of a directory bag that does not open on its own (to name it)."""
+    from rosbags.rosbag2.storage_mcap import McapReader
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+
     if not bag.is_dir():
         return None
     try:
@@ -103,6 +110,9 @@ def open_reader(path: str | Path) -> Iterator[Reader]:
 
     Errors raised while the caller iterates messages inside the ``with`` block are converted too.
     """
+    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2.errors import ReaderError
+
     bag = check_bag_path(path)
     try:
         reader = Reader(bag)
@@ -128,6 +138,8 @@ def open_reader(path: str | Path) -> Iterator[Reader]:
 
 def storage_identifier(reader: Reader) -> str:
     """``"mcap"`` or ``"sqlite3"``: the storage of an open reader."""
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+
     storages = storages_of(reader)
     if storages:
         return "sqlite3" if isinstance(storages[0], Sqlite3Reader) else "mcap"
