@@ -51,3 +51,28 @@ def test_duplicate_and_out_of_order_stamps_are_refused_and_counted():
     a.add("grs1", 5 * DT, 0, now_s=0.0)
     a.add("grs1", 4 * DT, 0, now_s=0.0)
     assert a.refused == {"grs1": {"duplicate_stamp": 1, "out_of_order_stamp": 1}}
+
+
+def _feed(a, streams, stamps_k, now_s=0.0):
+    out = []
+    for k in stamps_k:
+        for s in streams:
+            out += a.add(s, k * DT, k, now_s=now_s)
+    return out
+
+
+def test_a_restarted_source_marks_where_its_rerun_is_taken_up():
+    """Every stream going back in time (a simulator running its seed again) marks the first epoch
+    taken up from the rerun; one stream going back (a stale or flooding peer on one topic), a late
+    sample within the step-back bound, or the stamps the rerun repeats, mark nothing."""
+    a = EpochAssembler(STREAMS, max_silence_s=2.0)
+    first = _feed(a, STREAMS, range(100))                 # run 1 up to 9.9 s
+    first += _feed(a, ("grs1",), range(50))               # a stale peer on one topic
+    first += _feed(a, STREAMS, range(100, 150))
+    first += _feed(a, STREAMS, [145])                     # late by 0.4 s: refused, not a step back
+    assert not any(e.after_restart for e in first)
+    rerun = _feed(a, STREAMS, range(0, 200))              # the rerun from t = 0
+    assert rerun[0].t_ns == 150 * DT                      # taken up once the rerun passed 14.9 s
+    assert [e.t_ns for e in rerun if e.after_restart] == [150 * DT]
+    # the rerun up to 14.8 s is out of order, its 14.9 s the stamp the stream is at
+    assert a.refused["grs1"] == {"out_of_order_stamp": 50 + 1 + 149, "duplicate_stamp": 1}

@@ -6,7 +6,10 @@ possible can put one topic many seconds of stamps ahead). So an epoch is release
 once every stream has either delivered its sample for that stamp or moved past it; a stream that
 goes silent (no message for ``max_silence_s`` of wall time, e.g. a star-tracker dropout or a dead
 sensor) stops holding epochs back. ``max_pending`` bounds memory. Duplicate and out-of-order stamps
-of a stream are refused and counted. Plain Python: no middleware.
+of a stream are refused and counted. When every stream has stepped back in time (a restarted source,
+e.g. a simulator running its seed again) the next epoch released is marked ``after_restart``: the
+estimators start a new segment there instead of joining two runs' dynamics. Plain Python: no
+middleware.
 """
 
 from __future__ import annotations
@@ -15,6 +18,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+#: a stamp this far behind its stream's latest [ns] is a step back in time, not a late sample
+RESTART_STEP_BACK_NS = 1_000_000_000
+
 
 @dataclass
 class Epoch:
@@ -22,6 +28,9 @@ class Epoch:
 
     t_ns: int
     samples: dict[str, Any] = field(default_factory=dict)
+    #: every stream went back in time before this epoch (a restarted source, e.g. a simulator rerun):
+    #: its data need not continue the dynamics of the epochs before
+    after_restart: bool = False
 
 
 class EpochAssembler:
@@ -47,6 +56,8 @@ class EpochAssembler:
         self._first_heard_s: float | None = None
         self._released_ns = -1
         self.refused: dict[str, dict[str, int]] = {}
+        #: streams whose stamps went back by more than RESTART_STEP_BACK_NS since the last released epoch
+        self._went_back: set[str] = set()
 
     def _refuse(self, stream: str, reason: str) -> None:
         counts = self.refused.setdefault(stream, {})
@@ -64,6 +75,8 @@ class EpochAssembler:
             return []
         if t_ns < self._latest[stream] or t_ns <= self._released_ns:
             self._refuse(stream, "out_of_order_stamp")
+            if t_ns < self._latest[stream] - RESTART_STEP_BACK_NS:
+                self._went_back.add(stream)
             return []
         self._latest[stream] = t_ns
         self._pending.setdefault(t_ns, Epoch(t_ns)).samples[stream] = payload
@@ -82,16 +95,20 @@ class EpochAssembler:
             overflow = len(self._pending) > self.max_pending
             if waiting and not overflow and not all(s in silent for s in waiting):
                 break
-            released.append(self._pending.pop(t_ns))
-            self._released_ns = t_ns
+            released.append(self._release(t_ns))
         return released
+
+    def _release(self, t_ns: int) -> Epoch:
+        epoch = self._pending.pop(t_ns)
+        # a restart sends every stream back; one stale or flooding peer sends back only its own topic
+        epoch.after_restart = self._went_back >= set(self.streams)
+        self._went_back.clear()
+        self._released_ns = t_ns
+        return epoch
 
     def flush(self) -> list[Epoch]:
         """Release everything still pending (end of data), oldest first."""
-        released = [self._pending.pop(t) for t in sorted(self._pending)]
-        if released:
-            self._released_ns = released[-1].t_ns
-        return released
+        return [self._release(t) for t in sorted(self._pending)]
 
     def state_dict(self) -> dict[str, Any]:
         return {"latest": dict(self._latest), "released_ns": self._released_ns, "refused": self.refused}

@@ -676,6 +676,12 @@ class ComOffsetEstimator:
     def _tau(self, t_s: float) -> float:
         return (float(t_s) - float(self.t0_s)) / self.options.trend_time_scale_s  # type: ignore[arg-type]
 
+    def start_new_segment(self) -> None:
+        """The next epoch starts a new segment (diffuse state): its data need not continue the dynamics
+        of the epochs before (a restarted source). The information on d is kept."""
+        if not self.filter.fresh:
+            self.filter.reset_segment()
+
     def update(self, t_s: float, voltages: Mapping[int, ArrayLike] | None, omega_rad_s: ArrayLike | None = None,
                scale_factors: ScaleFactorEstimate | tuple[ArrayLike, ArrayLike] | None = None
                ) -> ComOffsetStepReport:

@@ -489,6 +489,13 @@ class ScaleFactorEstimator:
             self.t0_s = float(t_s)
         return round((float(t_s) - self.t0_s) * self.instrument.sample_rate_hz)
 
+    def start_new_segment(self) -> None:
+        """The next epoch starts a new segment (diffuse state): its data need not continue the dynamics
+        of the epochs before (a restarted source). The information on G is kept."""
+        if not self.filter.fresh:
+            self.filter.reset_segment()
+            self._cache = None
+
     def _bridge(self, missing: int) -> None:
         """Advance over ``missing`` epochs without any data."""
         if missing <= 0:
@@ -938,6 +945,12 @@ class PaperScaleFactorFilter:
         self.t_last_s = float("nan")
         self.nis: dict[int, list[float]] = {g: [] for g in self.grs_ids}
         self._last_index: int | None = None
+
+    def start_new_segment(self) -> None:
+        """The next epoch starts a new segment: no smoothing window straddles the two (a restarted source)."""
+        self._buffer_index.clear()
+        self._buffer_phi.clear()
+        self._buffer_diff.clear()
 
     def _measurements(self, phi_window: np.ndarray, diff_window: Mapping[int, np.ndarray]
                       ) -> tuple[np.ndarray, dict[int, np.ndarray]]:

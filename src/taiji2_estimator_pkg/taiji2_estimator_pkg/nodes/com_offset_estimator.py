@@ -56,7 +56,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         for gid in GRS_IDS:
             self.create_subscription(t.GrsVoltages, common.GRS_TOPICS[gid], lambda m, g=gid: self._on_grs(m, g), qos)
             self.create_subscription(t.ScaleFactorEstimate, f"/taiji2/estimates/grs{gid}/scale_factors",
-                                     self._on_scale_factors, qos)
+                                     self._on_scale_factors, common.estimate_qos())
         if self.paper:
             self.create_subscription(t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
         if self.use_rate:

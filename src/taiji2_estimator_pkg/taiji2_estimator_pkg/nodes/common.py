@@ -78,6 +78,15 @@ def raw_qos() -> Any:
                                 reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
 
 
+def estimate_qos() -> Any:
+    """Reliable keep-all, transient local: estimates are kept for late joiners, so a c.m.-offset
+    estimator (re)started after the scale-factor estimator's last estimate still gets it. Volatile
+    subscribers (recorders, plots, ``ros2 topic echo``) match it as well."""
+    return rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL,
+                                reliability=rclpy.qos.ReliabilityPolicy.RELIABLE,
+                                durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+
+
 def grs_message_problem(msg: Any, grs_id: int) -> str | None:
     """Why a GrsVoltages message does not belong on GRS ``grs_id``'s topic (None if it does)."""
     if int(msg.grs_id) != grs_id:
@@ -185,12 +194,26 @@ class EstimatorNode(rclpy.node.Node):
         if self.resumed_from_ns is not None and self.data_gap_s is None:
             self.data_gap_s = (t_ns - self.resumed_from_ns) / 1e9
         for epoch in self.assembler.add(stream, t_ns, payload, self.last_data_wall):
-            self._process(epoch)
+            self._process_epoch(epoch)
 
     def _release_silent(self) -> None:
         for epoch in self.assembler.expire(time.monotonic()):
-            self._process(epoch)
+            self._process_epoch(epoch)
         self._publish_at_end_of_data()
+
+    def _process_epoch(self, epoch: Any) -> None:
+        """:meth:`_process`, after starting a new segment where the source restarted."""
+        if epoch.after_restart:
+            start = getattr(self.estimator, "start_new_segment", None)
+            if start is not None:
+                start()
+                self.get_logger().info(f"every raw stream went back in time (a restarted source): the data from "
+                                       f"t = {epoch.t_ns / 1e9:.1f} s on start a new segment")
+            else:
+                self.get_logger().warn(f"every raw stream went back in time (a restarted source): method "
+                                       f"{self.p['method']} joins the data from t = {epoch.t_ns / 1e9:.1f} s "
+                                       "to the run before (use method gls to keep them apart)")
+        self._process(epoch)
 
     def _publish_at_end_of_data(self) -> None:
         """Data stopped (end of a run, or a pause): publish the estimate of the last epoch, once.

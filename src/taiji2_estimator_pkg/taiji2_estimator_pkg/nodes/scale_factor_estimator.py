@@ -48,7 +48,8 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
         for gid in GRS_IDS:
             self.create_subscription(t.GrsVoltages, common.GRS_TOPICS[gid], lambda m, g=gid: self._on_grs(m, g), qos)
         self.estimate_pubs = {g: self.create_publisher(t.ScaleFactorEstimate,
-                                                       f"/taiji2/estimates/grs{g}/scale_factors", qos)
+                                                       f"/taiji2/estimates/grs{g}/scale_factors",
+                                                       common.estimate_qos())
                               for g in GRS_IDS}
         self.rate_pub = self.create_publisher(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, qos)
         self.get_logger().info(f"method {self.p['method']}, nominal model {self.p['layout']}, publishing every "
