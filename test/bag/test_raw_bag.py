@@ -41,17 +41,21 @@ def test_ground_segment_bag_loads_exactly(tmp_path, storage):
     assert len(load_raw_bag(single).grs2) == len(data["stamps"])
 
 
-def _contract_bag_with_problems(path):
-    """Our own writer with hand-made structural problems on every raw topic."""
+def _contract_bag_with_problems(path, storage="mcap", split_at=()):
+    """Our own writer with hand-made structural problems on every raw topic, and custom data; a new
+    storage file (segment) from each epoch in ``split_at``."""
     from taiji2_runtime.bag.writer import BagWriter
     from taiji2_runtime.interfaces import typestore
 
     store = typestore()
-    writer = BagWriter(path, store)
+    writer = BagWriter(path, store, storage=storage)
+    writer.set_custom_data("taiji2.seed", "11")
     handles = {t: writer.add_topic(t, mt) for t, mt in TOPICS.items()}
     wrong = writer.add_topic("/taiji2/maneuver/command", "geometry_msgs/msg/Vector3Stamped")
     stamps = [0, 1, 2, 2, 3, 1, 4, 5]  # a duplicate (2) and an out-of-order stamp (1)
     for k, sec in enumerate(stamps):
+        if k in split_at:  # the segment's wall-time period is over
+            writer.poll(time.monotonic() + 3600.0)
         st = encode_messages(store, ST, {"header.stamp.sec": sec, "header.frame_id": "crf", "attitude.w": 1.0}, 1)[0]
         writer.write(handles["/taiji2/star_tracker"], k, st[:30] if k == 7 else st)  # last one truncated
         for i, topic in enumerate(("/taiji2/grs1/voltages", "/taiji2/grs2/voltages")):
@@ -80,35 +84,6 @@ def test_structural_problems_are_counted_per_topic(tmp_path):
     cmd = exp.report["/taiji2/maneuver/command"]
     assert cmd.dropped == {"wrong_type": 1} and cmd.loaded == 8
     assert set(cmd.found_types) == {CMD, "geometry_msgs/msg/Vector3Stamped"}
-
-
-def _contract_bag_sqlite3_in_segments(path):
-    """Our own writer, sqlite3, custom data, several files, a wrong type and messages of its own."""
-    from taiji2_runtime.bag.writer import BagWriter
-    from taiji2_runtime.interfaces import typestore
-
-    store = typestore()
-    writer = BagWriter(path, store, storage="sqlite3")
-    writer.set_custom_data("taiji2.seed", "11")
-    handles = {t: writer.add_topic(t, mt) for t, mt in TOPICS.items()}
-    wrong = writer.add_topic("/taiji2/maneuver/command", "geometry_msgs/msg/Vector3Stamped")
-    rng = np.random.default_rng(2)
-    for k in range(60):
-        ns = k * 100_000_000
-        if k in (20, 40):  # a segment's wall-time period is over: three storage files
-            writer.poll(time.monotonic() + 3600.0)
-        st = encode_messages(store, ST, {"header.stamp.sec": k, "header.frame_id": "crf", "attitude.w": 1.0}, 1)[0]
-        writer.write(handles["/taiji2/star_tracker"], ns, st[:30] if k == 7 else st)
-        for i, topic in enumerate(("/taiji2/grs1/voltages", "/taiji2/grs2/voltages")):
-            writer.write(handles[topic], ns, encode_messages(store, GRS, {
-                "header.stamp.sec": k, "header.frame_id": f"tmrf{i + 1}", "grs_id": i + 1,
-                "vx1": float(rng.normal())}, 1)[0])
-        if k % 10 == 0:
-            writer.write(handles["/taiji2/maneuver/command"], ns, encode_messages(
-                store, CMD, {"header.stamp.sec": k, "header.frame_id": "crf"}, 1)[0])
-    writer.write(wrong, 99, encode_messages(store, "geometry_msgs/msg/Vector3Stamped", {"header.frame_id": "crf"},
-                                            1)[0])
-    writer.close()
 
 
 def _humble_era_sqlite3(path):
@@ -142,16 +117,16 @@ def _assert_same_experiment(a, b):
                 assert value == getattr(y, field_name), (name, field_name)
 
 
-@pytest.mark.parametrize("make", [
-    lambda p: write_ground_segment_bag(p, "sqlite3"),
-    _contract_bag_sqlite3_in_segments,
-    _humble_era_sqlite3,
+@pytest.mark.parametrize("make,files", [
+    (lambda p: write_ground_segment_bag(p, "sqlite3"), 1),
+    (lambda p: _contract_bag_with_problems(p, "sqlite3", split_at=(3, 6)), 3),
+    (_humble_era_sqlite3, 1),
 ])
-def test_sqlite3_direct_open_reads_as_rosbags_reader(tmp_path, monkeypatch, make):
+def test_sqlite3_direct_open_reads_as_rosbags_reader(tmp_path, monkeypatch, make, files):
     """A sqlite3 directory bag is read without rosbags' Reader (no per-topic count scan on opening):
     the same arrays, reports, storage and custom data as through rosbags' Reader, for rosbags' own
-    writer (version 8, and made into a Humble-era bag) and ours (several files, custom data, a wrong
-    type, an undecodable message)."""
+    writer (version 8, and made into a Humble-era bag) and ours (three files, custom data, a wrong
+    type, an undecodable message, duplicate and out-of-order stamps, foreign frames and ids)."""
     from taiji2_estimator_pkg.io import raw_bag
     from taiji2_runtime.bag.sqlite3_direct import open_sqlite3_bag
 
@@ -159,7 +134,7 @@ def test_sqlite3_direct_open_reads_as_rosbags_reader(tmp_path, monkeypatch, make
     make(bag)
     opened = open_sqlite3_bag(bag)
     assert opened is not None and opened.files, "the direct path was not taken"
-    assert make is not _contract_bag_sqlite3_in_segments or len(opened.files) == 3, opened.files
+    assert len(opened.files) == files, opened.files
     direct = load_raw_bag(bag)
     monkeypatch.setattr(raw_bag, "open_sqlite3_bag", lambda _bag: None)
     _assert_same_experiment(direct, load_raw_bag(bag))
