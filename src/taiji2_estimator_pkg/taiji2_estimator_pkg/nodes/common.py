@@ -180,7 +180,9 @@ class EstimatorNode(rclpy.node.Node):
         self.last_publish_ns = -1  # data time of the last published estimate
         self.last_estimate: Any = None
         self.resumed_from_ns: int | None = None  # data time of the checkpoint this process resumed from
-        self.data_gap_s: float | None = None  # first sample after the resume - checkpoint time [s]
+        #: stamp of the first sample beyond the checkpoint after the resume - checkpoint time [s] (samples
+        #: at or before the checkpoint, e.g. a restarted simulator's rerun, are refused and counted instead)
+        self.data_gap_s: float | None = None
         self.resume_reported = False
         self.last_health_wall = time.monotonic()
         self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
@@ -191,7 +193,7 @@ class EstimatorNode(rclpy.node.Node):
     # -- input -----------------------------------------------------------------------------------
     def add_sample(self, stream: str, t_ns: int, payload: Any) -> None:
         self.last_data_wall = time.monotonic()
-        if self.resumed_from_ns is not None and self.data_gap_s is None:
+        if self.resumed_from_ns is not None and self.data_gap_s is None and t_ns > self.resumed_from_ns:
             self.data_gap_s = (t_ns - self.resumed_from_ns) / 1e9
         for epoch in self.assembler.add(stream, t_ns, payload, self.last_data_wall):
             self._process_epoch(epoch)
