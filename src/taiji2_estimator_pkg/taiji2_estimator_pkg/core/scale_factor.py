@@ -316,14 +316,19 @@ class ScaleFactorModel:
                 out[:, 3 * block:3 * block + 3] = self.to_model @ weights[g] @ self.c[g].T * differences[g][None, :]
         return out
 
+    def fused_input_matrix(self, grs: int) -> np.ndarray:
+        """(3, 3) ``M_g = T W_g C_g^T``: GRS g's U~ (times G) to the fused model-coordinate acceleration
+        when every GRS is present (the regular steps of the bulk paths)."""
+        return self.to_model @ self.weights[grs] @ self.c[grs].T
+
     def input_regressor_factors(self, differences: np.ndarray) -> RegressorFactors:
         """(L, 3, 3 n_grs) regressors of regular steps (all GRS present, :meth:`input_regressor` of each)
         as factors: the series are U~ (L, 3 n_grs) of differences (L, n_grs, 3), the patterns
-        ``M_g[:, c] e_j^T`` with ``M_g = T W_g C_g^T`` (j = 3 block + c)."""
+        ``M_g[:, c] e_j^T`` (:meth:`fused_input_matrix`, j = 3 block + c)."""
         n_series = 3 * len(self.grs_ids)
         patterns = np.zeros((n_series, 3, self.n_params))
         for block, grs in enumerate(self.grs_ids):
-            matrix = self.to_model @ self.weights[grs] @ self.c[grs].T
+            matrix = self.fused_input_matrix(grs)
             for c in range(3):
                 patterns[3 * block + c, :, 3 * block + c] = matrix[:, c]
         return RegressorFactors(differences.reshape(differences.shape[0], n_series), patterns)
@@ -333,8 +338,7 @@ class ScaleFactorModel:
         without forming the regressors), differences (L, n_grs, 3)."""
         out = np.zeros((differences.shape[0], 3))
         for block, grs in enumerate(self.grs_ids):
-            matrix = self.to_model @ self.weights[grs] @ self.c[grs].T
-            out += (differences[:, block, :] * g[3 * block:3 * block + 3]) @ matrix.T
+            out += (differences[:, block, :] * g[3 * block:3 * block + 3]) @ self.fused_input_matrix(grs).T
         return out
 
     def difference_row(self, differences_1: np.ndarray, differences_2: np.ndarray) -> np.ndarray:
