@@ -219,8 +219,6 @@ def _read_mcap(storage: McapReader, path: Path, wanted: dict[int, Key], with_dat
         part.pieces.append(RawPiece(blob, offsets, lengths))
 
 
-#: most topics read by one sqlite3 query (4 aggregate columns each; SQLite's column limit is 2000)
-_SQLITE_TOPICS_PER_QUERY = 100
 #: the table scan is split into this many id ranges, read concurrently (SQLite runs without the GIL)
 _SQLITE_PARTS = max(1, min(4, os.cpu_count() or 1))
 
@@ -232,16 +230,17 @@ def _sqlite_integers(text: str | None) -> np.ndarray:
     return np.fromstring(text, dtype=np.int64, sep=",")
 
 
-def _sqlite_aggregate_query(topic_ids: list[int], with_data: bool) -> str:
-    """One row: per topic, its ids, stamps and data lengths as text and its data as one blob."""
-    columns = []
-    for tid in topic_ids:
-        columns += [f"group_concat(CASE topic_id WHEN {tid} THEN id END, ',')",
-                    f"group_concat(CASE topic_id WHEN {tid} THEN timestamp END, ',')"]
-        if with_data:
-            columns += [f"group_concat(CASE topic_id WHEN {tid} THEN length(data) END, ',')",
-                        f"CAST(group_concat(CASE topic_id WHEN {tid} THEN data END, x'') AS BLOB)"]
-    return f"SELECT {', '.join(columns)} FROM messages WHERE id BETWEEN ? AND ?"
+def _sqlite_scan_query(topic_ids: list[int], with_data: bool) -> str:
+    """One row: the topic ids, ids, stamps and data lengths of the wanted rows as text, their data as one blob.
+
+    One aggregate per column over every wanted row (not one per topic: SQLite's cost is per
+    aggregate and row); numpy separates the topics afterwards.
+    """
+    columns = ["group_concat(topic_id, ',')", "group_concat(id, ',')", "group_concat(timestamp, ',')"]
+    if with_data:
+        columns += ["group_concat(length(data), ',')", "CAST(group_concat(data, x'') AS BLOB)"]
+    wanted = ", ".join(str(int(tid)) for tid in topic_ids)
+    return f"SELECT {', '.join(columns)} FROM messages WHERE id BETWEEN ? AND ? AND topic_id IN ({wanted})"
 
 
 def _sqlite_read_range(path: Path, query: str, first_id: int, last_id: int) -> tuple:
@@ -254,15 +253,64 @@ def _sqlite_read_range(path: Path, query: str, first_id: int, last_id: int) -> t
         db.close()
 
 
+@dataclass
+class _SqliteRows:
+    """The wanted rows of every id range, in range order: (n,) topic ids, row ids, stamps, lengths;
+    ``offsets`` of each row's data in ``blob``."""
+
+    topic_ids: np.ndarray
+    row_ids: np.ndarray
+    stamps: np.ndarray
+    lengths: np.ndarray | None
+    offsets: np.ndarray | None
+    blob: np.ndarray | None
+
+    @classmethod
+    def from_aggregates(cls, rows: list[tuple], with_data: bool) -> _SqliteRows:
+        """Parse the aggregate rows of :func:`_sqlite_scan_query`; a NULL anywhere (group_concat skips
+        it), a non-integer value or data of another length than ``length(data)`` leaves the fast path."""
+        try:
+            columns = [np.concatenate([_sqlite_integers(row[c]) for row in rows]) for c in range(4 if with_data else 3)]
+        except ValueError as exc:  # a non-integer stamp: let rosbags read it as it can
+            raise _FastPathUnavailable(f"sqlite3 column: {exc}") from exc
+        if any(column.shape != columns[1].shape for column in columns):  # row ids are never NULL
+            raise _FastPathUnavailable("sqlite3 aggregates of unequal length")
+        if not with_data:
+            return cls(columns[0], columns[1], columns[2], None, None, None)
+        blobs = [row[4] for row in rows if row[4]]
+        blob = np.frombuffer(blobs[0], dtype=np.uint8) if len(blobs) == 1 else \
+            np.concatenate([np.frombuffer(b, dtype=np.uint8) for b in blobs]) if blobs else np.zeros(0, np.uint8)
+        lengths = columns[3]
+        if int(lengths.sum()) != blob.shape[0]:
+            raise _FastPathUnavailable("sqlite3 data of another length than length(data)")
+        offsets = np.zeros_like(lengths)
+        np.cumsum(lengths[:-1], out=offsets[1:])
+        return cls(columns[0], columns[1], columns[2], lengths, offsets, blob)
+
+    def add_topic(self, topic_id: int, key: Key, parts: dict[Key, _Partial]) -> None:
+        """The rows of one topic, in bag order (stamp, then id: rosbags' order), into ``parts[key]``."""
+        rows = np.flatnonzero(self.topic_ids == topic_id)
+        if not rows.size:
+            return
+        stamps, row_ids = self.stamps[rows], self.row_ids[rows]
+        if np.any(stamps[1:] < stamps[:-1]) or np.any(row_ids[1:] <= row_ids[:-1]):
+            order = np.lexsort((row_ids, stamps))
+            rows, stamps = rows[order], stamps[order]
+        part = parts.setdefault(key, _Partial())
+        part.times.append(stamps)
+        if self.blob is not None:
+            part.pieces.append(RawPiece(self.blob, self.offsets[rows], self.lengths[rows]))  # type: ignore[index]
+
+
 def _read_sqlite(path: Path, wanted: set[Key], with_data: bool, parts: dict[Key, _Partial]) -> None:
     """Every wanted topic in one table scan, its rows aggregated inside SQLite.
 
-    Per topic, SQLite concatenates the ids, stamps and data lengths as text and the data as one
-    blob (``group_concat`` skips the NULLs of the other topics' rows), so no Python object is made
-    per message; numpy then orders the messages by (timestamp, id), the order of rosbags' reader.
-    The scan is split into id ranges read concurrently, one connection each. A value that is not an
-    integer where one belongs, or a topic whose data exceed SQLite's largest blob, leaves the fast
-    path (the generic iteration reads the same rows).
+    SQLite concatenates the topic ids, ids, stamps and data lengths of the wanted rows as text and
+    their data as one blob, so no Python object is made per message; numpy then separates the
+    topics and orders each by (timestamp, id), the order of rosbags' reader. The scan is split into
+    id ranges read concurrently, one connection each. A value that is not an integer where one
+    belongs, a NULL, or data beyond SQLite's largest blob leaves the fast path (the generic
+    iteration reads the same rows).
     """
     db = connect(path)
     try:
@@ -275,46 +323,15 @@ def _read_sqlite(path: Path, wanted: set[Key], with_data: bool, parts: dict[Key,
         return
     bounds = np.linspace(int(first_id) - 1, int(last_id), _SQLITE_PARTS + 1).astype(np.int64)
     ranges = [(int(lo) + 1, int(hi)) for lo, hi in itertools.pairwise(bounds) if hi > lo]
-    topic_ids = sorted(ids)
-    width = 4 if with_data else 2
+    query = _sqlite_scan_query(sorted(ids), with_data)
     with ThreadPoolExecutor(max_workers=len(ranges)) as pool:
-        for first in range(0, len(topic_ids), _SQLITE_TOPICS_PER_QUERY):
-            batch = topic_ids[first:first + _SQLITE_TOPICS_PER_QUERY]
-            query = _sqlite_aggregate_query(batch, with_data)
-            try:
-                rows = list(pool.map(lambda r, q=query: _sqlite_read_range(path, q, *r), ranges))
-            except Exception as exc:  # apsw.TooBigError: a topic's data beyond SQLite's largest blob
-                raise _FastPathUnavailable(f"sqlite3 aggregate: {exc}") from exc
-            for position, tid in enumerate(batch):
-                _sqlite_topic(ids[tid], [row[position * width:(position + 1) * width] for row in rows], with_data,
-                              parts)
-
-
-def _sqlite_topic(key: Key, cells_per_range: list[tuple], with_data: bool, parts: dict[Key, _Partial]) -> None:
-    """One topic's aggregates of every id range -> its stamps and messages in bag order."""
-    try:
-        row_ids = np.concatenate([_sqlite_integers(cells[0]) for cells in cells_per_range])
-        stamps = np.concatenate([_sqlite_integers(cells[1]) for cells in cells_per_range])
-        lengths = np.concatenate([_sqlite_integers(cells[2]) for cells in cells_per_range]) if with_data else None
-    except ValueError as exc:  # a non-integer stamp: let rosbags read it as it can
-        raise _FastPathUnavailable(f"sqlite3 column: {exc}") from exc
-    if not stamps.size:
-        return
-    if stamps.size != row_ids.size or (lengths is not None and lengths.size != stamps.size):
-        raise _FastPathUnavailable("sqlite3 aggregates of unequal length")
-    order = np.lexsort((row_ids, stamps))
-    part = parts.setdefault(key, _Partial())
-    part.times.append(stamps[order])
-    if lengths is None:
-        return
-    blobs = [cells[3] for cells in cells_per_range if cells[3]]
-    blob = np.frombuffer(blobs[0], dtype=np.uint8) if len(blobs) == 1 else \
-        np.concatenate([np.frombuffer(b, dtype=np.uint8) for b in blobs])
-    if int(lengths.sum()) != blob.shape[0]:
-        raise _FastPathUnavailable("sqlite3 data of another length than length(data)")
-    offsets = np.zeros_like(lengths)
-    np.cumsum(lengths[:-1], out=offsets[1:])
-    part.pieces.append(RawPiece(blob, offsets[order], lengths[order]))
+        try:
+            rows = list(pool.map(lambda r: _sqlite_read_range(path, query, *r), ranges))
+        except Exception as exc:  # apsw.TooBigError: the data beyond SQLite's largest blob
+            raise _FastPathUnavailable(f"sqlite3 aggregate: {exc}") from exc
+    scanned = _SqliteRows.from_aggregates(rows, with_data)
+    for tid, key in sorted(ids.items()):
+        scanned.add_topic(tid, key, parts)
 
 
 def _read_generic(reader: Reader, keys: Collection[Key], with_data: bool) -> dict[Key, _Partial]:
