@@ -59,3 +59,15 @@ def test_unknown_verb_is_a_one_line_usage_error():
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert "invalid choice" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_project_verbs_are_the_estimator_packages_entry_points():
+    """``PROJECT_VERBS`` (found without reading package metadata) lists exactly what the estimator
+    package declares in the ``taiji2.commands`` entry-point group."""
+    from importlib.metadata import distribution
+
+    from taiji2_runtime.cli.main import PROJECT_VERBS
+
+    declared = {ep.name: ep.value for ep in distribution("taiji2_estimator_pkg").entry_points
+                if ep.group == "taiji2.commands"}
+    assert declared == PROJECT_VERBS
