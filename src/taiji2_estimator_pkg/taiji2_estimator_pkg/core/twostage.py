@@ -774,61 +774,80 @@ class TwoStageFilter:
                     want_innovations: bool) -> RegularRunOutput:
         """Regular samples at the steady state: time-invariant closed loop, modal recursions.
 
-        Input regressors may come as factors ``U_k = sum_s c_k,s P_s``: their modal drive
-        ``V^-1 B U_k`` is then the few series times the constant ``V^-1 B P_s`` (one matrix product),
-        without forming the (L, n_u, p) regressors."""
+        Only one mode of each conjugate pair is computed: its partner is the complex conjugate, so a
+        real output ``X V w`` is ``sum_i c_i Re(X V[:, i] w_i)`` over the computed modes (c_i = 2 for
+        a pair, 1 for a real mode). The columns of the initial-state parameters have no drive after
+        the first sample: their modal coordinates are ``lambda_i^k w_0`` in closed form. Input
+        regressors may come as factors ``U_k = sum_s c_k,s P_s``: their modal drive ``V^-1 B U_k``
+        is then the few series times the constant ``V^-1 B P_s`` (one matrix product), without
+        forming the (L, n_u, p) regressors."""
         mdl = self.model
-        n, m, p, qt = mdl.n, mdl.m, self.p, self.q_total
+        m, p, qt = mdl.m, self.p, self.q_total
         length = y.shape[0]
         out = RegularRunOutput()
         if length == 0:
             return out
         evaluation = self.evaluation
+        # columns: data (0), parameters (1..p, driven by the regressors), initial state (p+1.., no drive)
         cols = 1 if evaluation else 1 + qt
+        driven = 1 if evaluation else 1 + p
         nis_parts, state_parts, innov_parts = [], [], []
         gain, fk = self.gain_ss, mdl.f @ self.gain_ss
-        i_kh = np.eye(n) - gain @ mdl.h
-        v, v_inv = self.mode_vectors, self.mode_vectors_inv
-        modes = self.modes
+        i_kh = np.eye(mdl.n) - gain @ mdl.h
+        computed = list(self._filtered_modes)
+        paired = set(self._conjugate_partner.values())
+        weight = np.array([2.0 if i in paired else 1.0 for i in computed])
+        # V c (n, n_f): real outputs are Re(V c w); V^-1 rows of the computed modes (n_f, n)
+        v_out, v_inv, modes = self.mode_vectors[:, computed] * weight, self.mode_vectors_inv[computed], \
+            self.modes[computed]
         dtype: type = complex
         if self._real_modes:
-            v, v_inv, modes, dtype = v.real, v_inv.real, modes.real, float
+            v_out, v_inv, modes, dtype = v_out.real, v_inv.real, modes.real, float
+        n_f = len(computed)
         whiten_t = self._whiten.T
-        v_b, v_fk, w_hv = v_inv @ mdl.b, v_inv @ fk, whiten_t @ mdl.h @ v
+        v_b, v_fk, w_hv = v_inv @ mdl.b, v_inv @ fk, whiten_t @ mdl.h @ v_out
         xr_all = None if (x_reg is None or evaluation) else np.asarray(x_reg, dtype=np.float64)
         u0_all = None if u0 is None else np.asarray(u0, dtype=np.float64)
         ur_all = ur_series = vb_patterns = None
         if isinstance(u_reg, RegressorFactors) and not evaluation:
             ur_series, ur_patterns = u_reg.series, u_reg.patterns
             n_s = ur_patterns.shape[0]
-            vb_patterns = np.einsum("nu,sup->snp", v_b, ur_patterns).reshape(n_s, n * p)
+            vb_patterns = np.einsum("nu,sup->snp", v_b, ur_patterns).reshape(n_s, n_f * p)
         elif u_reg is not None and not evaluation:
             ur_all = np.asarray(u_reg, dtype=np.float64)
+        # lambda_i^k, k < chunk: the undriven columns
+        powers = modes[:, None] ** np.arange(min(_CHUNK, length)) if cols > driven else None
         start = 0
         while start < length:
             stop = min(start + _CHUNK, length)
             count = stop - start
             yc = y[start:stop]
             xc = None if xr_all is None else xr_all[start:stop]
-            # modal drive (n, count, cols) of w_k = lambda w_{k-1} + V^-1 D_k (index 0 unused), with
+            # modal drive (n_f, count, driven) of w_k = lambda w_{k-1} + V^-1 D_k (index 0 unused), with
             # D_k = B (u0_k + U_k theta) + F K (y_{k-1} - X_{k-1} theta): built in modal coordinates
-            modal_drive = np.empty((n, count, cols), dtype=dtype)
+            modal_drive = np.empty((n_f, count, driven), dtype=dtype)
             modal_drive[:, 1:, 0] = v_fk @ yc[:-1].T
             if u0_all is not None:
                 modal_drive[:, 1:, 0] += v_b @ u0_all[start + 1:stop].T
-            modal_drive[:, 1:, 1 + p:] = 0.0
             # regressors measurement-major once per chunk: (m, count, p)
             xt = None if xc is None else np.ascontiguousarray(np.moveaxis(xc, 1, 0))
-            if xt is not None:
-                modal_drive[:, 1:, 1:1 + p] = -(v_fk @ xt.reshape(m, -1)).reshape(n, count, p)[:, :-1]
-            else:
-                modal_drive[:, 1:, 1:1 + p] = 0.0
-            if ur_all is not None:
-                modal_drive[:, 1:, 1:1 + p] += np.tensordot(v_b, ur_all[start + 1:stop], axes=([1], [1]))
-            elif ur_series is not None:
-                modal_drive[:, 1:, 1:1 + p] += np.moveaxis(
-                    (ur_series[start + 1:stop] @ vb_patterns).reshape(count - 1, n, p), 1, 0)
-            first = np.empty((n, cols))
+            if not evaluation:
+                if xt is not None:
+                    modal_drive[:, 1:, 1:] = -(v_fk @ xt.reshape(m, -1)).reshape(n_f, count, p)[:, :-1]
+                if ur_all is not None:
+                    input_drive = np.tensordot(v_b, ur_all[start + 1:stop], axes=([1], [1]))
+                elif ur_series is not None:
+                    input_drive = np.moveaxis(
+                        (ur_series[start + 1:stop] @ vb_patterns).reshape(count - 1, n_f, p), 1, 0)
+                else:
+                    input_drive = None
+                if input_drive is None and xt is None:
+                    modal_drive[:, 1:, 1:] = 0.0
+                elif input_drive is not None and xt is None:
+                    modal_drive[:, 1:, 1:] = input_drive
+                elif input_drive is not None:
+                    modal_drive[:, 1:, 1:] += input_drive
+            first = np.empty((mdl.n, cols))
             if self.fresh:
                 first[:, 0] = self.x
                 if not evaluation:
@@ -845,15 +864,16 @@ class TwoStageFilter:
                     elif ur_series is not None:
                         first[:, 1:1 + p] += mdl.b @ u_reg.rows(start, start + 1).dense()[0]
             w_first = v_inv @ first
-            modal = np.empty((n, count, cols), dtype=dtype)
+            modal = np.empty((n_f, count, cols), dtype=dtype)
             modal[:, 0, :] = w_first
             if count > 1:
-                for i in self._filtered_modes:
-                    first_order_recursion(modes[i], modal_drive[i, 1:], w_first[i], out=modal[i, 1:])
-                for i, j in self._conjugate_partner.items():
-                    modal[i, 1:, :] = np.conj(modal[j, 1:, :])
-            # prior states x^_k = V w_k (data column) and innovations e0 = y - H x^
-            states = v @ modal[:, :, 0]
+                for r in range(n_f):
+                    first_order_recursion(modes[r], modal_drive[r, 1:], w_first[r, :driven],
+                                          out=modal[r, 1:, :driven])
+                if powers is not None:
+                    modal[:, 1:, driven:] = powers[:, 1:count, None] * w_first[:, None, driven:]
+            # prior states x^_k = Re(V c w_k) (data column) and innovations e0 = y - H x^
+            states = v_out @ modal[:, :, 0]
             if dtype is complex:
                 states = states.real
             e0 = yc.T - mdl.h @ states  # (m, count)
@@ -866,10 +886,9 @@ class TwoStageFilter:
                     state_parts.append((states + gain @ e0).T)
                 last = states[:, -1:]
             else:
-                # whitened sensitivities L^T S, S = H M + X = (H V) w + X
-                sw = np.tensordot(w_hv, modal[:, :, 1:], axes=([1], [0]))  # (m, count, qt)
-                if dtype is complex:
-                    sw = sw.real.copy()
+                # whitened sensitivities L^T S, S = H M + X = Re(H V c w) + X (data column computed along)
+                sw = np.tensordot(w_hv, modal, axes=([1], [0]))[:, :, 1:]  # (m, count, qt)
+                sw = np.ascontiguousarray(sw.real if dtype is complex else sw)
                 if xt is not None:
                     sw[:, :, :p] += (whiten_t @ xt.reshape(m, -1)).reshape(m, count, p)
                 sw = sw.reshape(m * count, qt)
@@ -879,7 +898,7 @@ class TwoStageFilter:
                 self.chi2 += float(ew @ ew)
                 self.n_updates += count
                 self.dof_total += count * m
-                last = v @ modal[:, -1, :]
+                last = v_out @ modal[:, -1, :]
                 if dtype is complex:
                     last = last.real
             # posterior of the last step of the chunk
