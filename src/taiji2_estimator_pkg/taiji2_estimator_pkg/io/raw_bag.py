@@ -273,8 +273,9 @@ def _decode_topic(topic: str, raw: RawMessages, report: TopicReport) -> dict[str
         result[name] = column
     if order is not None:
         keep = keep[order]
-    for name in result:
-        result[name] = result[name][keep]
+    if not keep.all():
+        for name in result:
+            result[name] = result[name][keep]
     stamp = result["header.stamp.sec"].astype(np.int64) * _NS + result["header.stamp.nanosec"].astype(np.int64)
     result["stamp_ns"] = stamp
     report.loaded = int(stamp.shape[0])

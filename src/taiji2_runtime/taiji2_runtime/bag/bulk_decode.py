@@ -186,7 +186,10 @@ def _split_groups(leaves: list[Leaf], pieces: list[RawPiece]) -> tuple[list[_Gro
         sel = np.flatnonzero(inside)
         blob = pieces[group.piece].blob
         values = np.ascontiguousarray(gather(blob, group.offsets[sel] + next_string, 4)).view("<u4").reshape(-1)
-        unique, inverse = np.unique(values, return_inverse=True)
+        if values.shape[0] and np.all(values == values[0]):  # the common case: one length (no sort)
+            unique, inverse = values[:1], np.zeros(values.shape[0], dtype=np.intp)
+        else:
+            unique, inverse = np.unique(values, return_inverse=True)
         if len(pending) + len(done) + unique.shape[0] > _MAX_GROUPS:
             fallback.extend((group.piece, int(i)) for i in group.local[sel])
             continue
@@ -209,6 +212,23 @@ def _from_message(msg: Any, path: str) -> Any:
         else:
             value = getattr(value, part)
     return value
+
+
+def _record_dtype(leaves: list[Leaf], offsets: list[int], string_lengths: tuple[int, ...], size: int) -> np.dtype:
+    """Structured dtype of one message of this layout: each leaf at its offset (strings: their
+    characters without the length prefix and NUL; empty strings read one byte of the NUL, b"")."""
+    names, formats, positions = [], [], []
+    lengths = iter(string_lengths)
+    for leaf, offset in zip(leaves, offsets, strict=True):
+        names.append(leaf.path)
+        if leaf.base == "string":
+            length = next(lengths)
+            formats.append(f"S{max(length - 1, 1)}")
+            positions.append(offset + 4)
+        else:
+            formats.append((leaf.dtype, (leaf.count,)) if leaf.is_array else leaf.dtype)
+            positions.append(offset)
+    return np.dtype({"names": names, "formats": formats, "offsets": positions, "itemsize": size})
 
 
 def decode_messages(store: Typestore, msgtype: str, pieces: list[RawPiece],
@@ -260,22 +280,18 @@ def decode_messages(store: Typestore, msgtype: str, pieces: list[RawPiece],
         if sel.shape[0] == 0:
             continue
         rows = bases[group.piece] + group.local[sel]
+        # consecutive rows (the common case): slice assignments instead of scattering
+        target: np.ndarray | slice = slice(int(rows[0]), int(rows[-1]) + 1) \
+            if int(rows[-1]) - int(rows[0]) + 1 == rows.shape[0] else rows
         data = np.ascontiguousarray(gather(pieces[group.piece].blob, group.offsets[sel], size))
-        string_lengths = iter(group.strings)
-        for leaf, offset in zip(leaves, offsets, strict=True):
+        # every field a view of the gathered bytes (a structured dtype of this layout): one copy per column
+        record = data.view(_record_dtype(leaves, offsets, group.strings, size)).reshape(-1)
+        for leaf in leaves:
             if leaf.base == "string":
-                length = next(string_lengths)
-                if length == 1:
-                    text = np.zeros(rows.shape[0], dtype="S1")
-                else:
-                    chars = data[:, offset + 4: offset + 3 + length]
-                    text = np.ascontiguousarray(chars).view(f"S{length - 1}").reshape(-1)
-                strings[leaf.path].append((rows, text))
+                strings[leaf.path].append((rows, record[leaf.path]))
             else:
-                width = leaf.size * leaf.count
-                block = np.ascontiguousarray(data[:, offset: offset + width]).view(leaf.dtype)
-                numeric[leaf.path][rows] = block if leaf.is_array else block.reshape(-1)
-        valid[rows] = True
+                numeric[leaf.path][target] = record[leaf.path]
+        valid[target] = True
         bulk_rows += int(rows.shape[0])
     columns: dict[str, np.ndarray] = dict(numeric)
     fallback_text: dict[str, list[tuple[int, bytes]]] = {path: [] for path in strings}
