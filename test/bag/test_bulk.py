@@ -148,3 +148,40 @@ def test_sqlite3_aggregate_read_orders_ties_and_keeps_empty_topics(tmp_path, mon
     for topic in ("/a", "/b"):
         assert by_topic[topic].log_time_ns.tolist() == [s for s, _ in reference[topic]]
         assert by_topic[topic].messages() == [d for _, d in reference[topic]]
+
+
+@pytest.mark.parametrize("stamp", ["1205.5", "'abc'"])
+def test_sqlite3_rows_the_aggregate_cannot_take_are_read_as_rosbags_reads_them(tmp_path, stamp):
+    """A row whose stamp is not an integer leaves the aggregate path: a real is read as rosbags'
+    reader reads it (stamps as integers, same bytes, same order); text is a one-line error naming
+    the bag."""
+    import apsw
+
+    from taiji2_runtime.bag.errors import BagError
+
+    store = typestore()
+    bag = tmp_path / "bag"
+    writer = Writer(bag, version=9, storage_plugin=StoragePlugin.SQLITE3)
+    writer.open()
+    connection = writer.add_connection("/a", TYPES[1], typestore=store)
+    rng = np.random.default_rng(11)
+    for k in range(50):
+        raw = encode_messages(store, TYPES[1], _columns(store, TYPES[1], 1, rng), 1)[0]
+        writer.write(connection, 1000 + 10 * k, raw)
+    writer.close()
+    (db3,) = bag.glob("*.db3")
+    db = apsw.Connection(str(db3))
+    db.execute(f"UPDATE messages SET timestamp = {stamp} WHERE id = 21")
+    db.close()
+    with open_reader(bag) as reader:
+        if stamp == "'abc'":
+            with pytest.raises(BagError, match="bag"):
+                read_raw_messages(reader)
+            return
+        bulk = read_raw_messages(reader)
+        reference = [(stamp, data) for _, stamp, data in reader.messages()]
+    (messages,) = bulk.values()
+    assert messages.count == 50
+    assert messages.log_time_ns.tolist() == [int(s) for s, _ in reference]
+    assert 1205 in messages.log_time_ns.tolist()
+    assert messages.messages() == [bytes(d) for _, d in reference]
