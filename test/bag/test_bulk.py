@@ -118,13 +118,14 @@ def test_read_raw_messages_equals_rosbags_reader(tmp_path, storage, compress):
         assert messages.log_time_ns.tolist() == bulk[key].log_time_ns.tolist()
 
 
-@pytest.mark.parametrize("parts", [1, 2, 3, 7])
-def test_sqlite3_aggregate_read_orders_ties_and_keeps_empty_topics(tmp_path, monkeypatch, parts):
+@pytest.mark.parametrize("parts,range_bytes", [(1, 2**28), (2, 2**28), (3, 2**28), (7, 2**28), (2, 4096)])
+def test_sqlite3_aggregate_read_orders_ties_and_keeps_empty_topics(tmp_path, monkeypatch, parts, range_bytes):
     """sqlite3: messages of equal stamps stay in insertion (id) order, rows interleaved across topics
     are separated, a topic without messages is listed empty; bytes as rosbags reads them. The same
-    whatever the number of id ranges the table scan is split into (as many as the machine has cores),
-    ties and descending stamps straddling the ranges' borders included."""
+    whatever the number of id ranges the table scan is split into (as many as the machine has cores,
+    more for a big file), ties and descending stamps straddling the ranges' borders included."""
     monkeypatch.setattr(bulk_read, "_SQLITE_PARTS", parts)
+    monkeypatch.setattr(bulk_read, "_SQLITE_RANGE_BYTES", range_bytes)
     store = typestore()
     bag = tmp_path / "bag"
     writer = Writer(bag, version=9, storage_plugin=StoragePlugin.SQLITE3)

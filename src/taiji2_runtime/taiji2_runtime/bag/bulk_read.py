@@ -221,6 +221,8 @@ def _read_mcap(storage: McapReader, path: Path, wanted: dict[int, Key], with_dat
 
 #: the table scan is split into this many id ranges, read concurrently (SQLite runs without the GIL)
 _SQLITE_PARTS = max(1, min(4, os.cpu_count() or 1))
+#: ... and into more for a big file: each range's data stay far below SQLite's largest value (1e9 bytes)
+_SQLITE_RANGE_BYTES = 256 * 2**20
 
 
 def _sqlite_integers(text: str | None) -> np.ndarray:
@@ -321,10 +323,11 @@ def _read_sqlite(path: Path, wanted: set[Key], with_data: bool, parts: dict[Key,
         db.close()
     if first_id is None or not ids:
         return
-    bounds = np.linspace(int(first_id) - 1, int(last_id), _SQLITE_PARTS + 1).astype(np.int64)
+    count = max(_SQLITE_PARTS, -(-path.stat().st_size // _SQLITE_RANGE_BYTES))
+    bounds = np.linspace(int(first_id) - 1, int(last_id), count + 1).astype(np.int64)
     ranges = [(int(lo) + 1, int(hi)) for lo, hi in itertools.pairwise(bounds) if hi > lo]
     query = _sqlite_scan_query(sorted(ids), with_data)
-    with ThreadPoolExecutor(max_workers=len(ranges)) as pool:
+    with ThreadPoolExecutor(max_workers=min(len(ranges), _SQLITE_PARTS)) as pool:
         try:
             rows = list(pool.map(lambda r: _sqlite_read_range(path, query, *r), ranges))
         except Exception as exc:  # apsw.TooBigError: the data beyond SQLite's largest blob
