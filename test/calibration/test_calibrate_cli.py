@@ -114,3 +114,22 @@ def test_foreign_writer_bag_calibrates_like_the_core(tmp_path, simulated, storag
         np.testing.assert_allclose(result[grs]["scale_factors_cov"], direct[grs]["scale_factors_cov"], rtol=1e-9)
         sigma_d = np.sqrt(np.diag(direct[grs]["com_offset_cov"]))
         assert np.all(np.abs(np.subtract(result[grs]["com_offset"], direct[grs]["com_offset"])) < 1e-6 * sigma_d)
+
+
+def test_missing_samples_are_counted_as_missing_and_each_rejection_once(simulated):
+    """A gap (samples never recorded) is reported as missing per stream, not as rejected NaN; a NaN
+    sample in the data is one rejection, although both estimator stages check it."""
+    instrument = InstrumentModel.from_layout("type1")
+    stamps = 1_700_000_000 * 10**9 + np.rint(simulated.t_s * 1e9).astype(np.int64)
+    keep = np.ones(stamps.size, dtype=bool)
+    keep[500:507] = False  # 7 samples of every stream lost
+    grs2_keep = keep.copy()
+    grs2_keep[900:903] = False  # 3 more of GRS2 only
+    volts = simulated.voltages_v.copy()
+    volts[1200, 0, 2] = np.nan  # one GRS1 sample with a NaN voltage
+    record = align_streams(stamps[keep], simulated.st_quat_xyzw[keep],
+                           {1: (stamps[keep], volts[keep, 0]), 2: (stamps[grs2_keep], volts[grs2_keep, 1])}, 10.0)
+    table = calibrate(record, instrument)
+    assert table.extra["missing"] == {"star_tracker": 7, "grs1": 7, "grs2": 10}
+    assert table.extra["rejected"] == {"grs1": {"nan_or_inf": 1}}
+    assert all(r.samples_rejected == 1 for r in table.grs)

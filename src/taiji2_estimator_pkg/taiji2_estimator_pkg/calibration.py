@@ -30,6 +30,8 @@ class AlignedRecord:
     quat_xyzw: np.ndarray
     voltages_v: np.ndarray
     rejected: dict[str, dict[str, int]] = field(default_factory=dict)
+    #: stream -> grid rows without a sample of it (NaN rows: missing, not rejected)
+    missing: dict[str, int] = field(default_factory=dict)
 
     def count(self, stream: str, reason: str, n: int) -> None:
         if n:
@@ -55,7 +57,8 @@ def align_streams(star_t_ns: np.ndarray, quat_xyzw: np.ndarray, grs: Mapping[int
     Returns
     -------
     AlignedRecord
-        Duplicate stamps (first kept) and stamps off the grid are counted as rejected.
+        Duplicate stamps (first kept) and stamps off the grid are counted as rejected; grid rows
+        without a sample of a stream are counted as missing.
 
     Raises
     ------
@@ -75,6 +78,7 @@ def align_streams(star_t_ns: np.ndarray, quat_xyzw: np.ndarray, grs: Mapping[int
     record = AlignedRecord(t_s=(t0 + np.arange(n, dtype=np.int64) * dt_ns) / 1e9,
                            quat_xyzw=np.full((n, 4), np.nan), voltages_v=np.full((n, len(GRS_IDS), 6), np.nan))
     for name, (t_ns, values) in streams.items():
+        record.missing[name] = n
         if not t_ns.size:
             continue
         position = (t_ns - t0) / dt_ns
@@ -88,6 +92,7 @@ def align_streams(star_t_ns: np.ndarray, quat_xyzw: np.ndarray, grs: Mapping[int
         first[1:] = index[1:] != index[:-1]
         record.count(name, "duplicate_stamp", int(np.count_nonzero(~first)))
         index, rows = index[first], rows[first]
+        record.missing[name] = n - int(index.size)
         if name == "star_tracker":
             record.quat_xyzw[index] = rows
         else:
@@ -102,6 +107,29 @@ def _merge(*counts: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, int]
             for reason, n in reasons.items():
                 out.setdefault(stream, {})[reason] = out.setdefault(stream, {}).get(reason, 0) + int(n)
     return out
+
+
+def _estimator_rejections(record: AlignedRecord, *stages: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, int]]:
+    """The rejections of the estimator stages, each sample counted once.
+
+    Both stages check the same record with the same input rules, so an input rejection is counted
+    by each: per stream and reason the larger count is kept (gating, which each stage does to its
+    own residuals, is summed). The NaN rows that :func:`align_streams` leaves where a stream has no
+    sample are missing data, not rejected samples: they are taken off ``nan_or_inf``.
+    """
+    out: dict[str, dict[str, int]] = {}
+    for stage in stages:
+        for stream, reasons in stage.items():
+            for reason, n in reasons.items():
+                seen = out.setdefault(stream, {}).get(reason, 0)
+                out[stream][reason] = seen + int(n) if reason == "gated" else max(seen, int(n))
+    for stream, missing in record.missing.items():
+        reasons = out.get(stream, {})
+        if "nan_or_inf" in reasons:
+            reasons["nan_or_inf"] -= min(missing, reasons["nan_or_inf"])
+            if not reasons["nan_or_inf"]:
+                del reasons["nan_or_inf"]
+    return {stream: reasons for stream, reasons in out.items() if reasons}
 
 
 def calibrate(record: AlignedRecord, instrument: InstrumentModel, method: str = "gls") -> EstimateTable:
@@ -119,13 +147,14 @@ def calibrate(record: AlignedRecord, instrument: InstrumentModel, method: str = 
     Returns
     -------
     EstimateTable
-        With ``extra["rejected"]`` (stream -> reason -> count) and ``extra["samples"]``.
+        With ``extra["rejected"]`` (stream -> reason -> count, each sample once), ``extra["missing"]``
+        (stream -> grid samples without a message) and ``extra["samples"]``.
     """
     if method not in ("gls", "paper"):
         raise ValueError(f"method: {method!r} is not one of gls, paper")
     result = pipeline_calibrate(record.t_s, record.quat_xyzw, record.voltages_v, instrument, GRS_IDS, method)
     g, d = result.scale_factors, result.com_offsets
-    rejected = _merge(record.rejected, g.rejected, d.rejected)
+    rejected = _merge(record.rejected, _estimator_rejections(record, g.rejected, d.rejected))
     total_rejected = sum(sum(v.values()) for v in rejected.values())
     results = []
     for gid in GRS_IDS:
@@ -138,7 +167,7 @@ def calibrate(record: AlignedRecord, instrument: InstrumentModel, method: str = 
     diff, diff_cov = d.difference()
     return EstimateTable(method=g.method, grs=results, difference_m=np.asarray(diff),
                          difference_cov=np.asarray(diff_cov),
-                         extra={"rejected": rejected, "samples": {"epochs": int(record.t_s.size),
-                                                                  "scale_factor_updates": int(g.n_samples),
-                                                                  "com_offset_updates": int(d.n_samples)},
+                         extra={"rejected": rejected, "missing": {k: v for k, v in record.missing.items() if v},
+                                "samples": {"epochs": int(record.t_s.size), "scale_factor_updates": int(g.n_samples),
+                                            "com_offset_updates": int(d.n_samples)},
                                 "determined": bool(g.determined and d.determined)})

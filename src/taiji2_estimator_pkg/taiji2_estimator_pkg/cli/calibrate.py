@@ -5,7 +5,8 @@ Works on any ROS 2 bag that follows the raw-data contract (/taiji2/star_tracker,
 estimator cores as the nodes, in bulk, and prints the result table, or with --json one JSON
 object with, per GRS, "scale_factors", "scale_factors_cov", "com_offset" (CRF, m),
 "com_offset_cov", plus "com_offset_difference" (d1 - d2) and its covariance, and the counts of
-samples used and rejected (per topic and reason).
+samples used and rejected (per topic and reason, each sample once) and of the grid samples missing
+per topic ("missing": no message at that time; not rejected).
 """
 
 from __future__ import annotations
@@ -54,6 +55,9 @@ def main(args: argparse.Namespace) -> int:
     if rejected:
         print("rejected: " + "; ".join(f"{s}: " + ", ".join(f"{r} {n}" for r, n in v.items())
                                        for s, v in rejected.items()))
+    if table.extra["missing"]:
+        print("missing (grid samples without a message): "
+              + ", ".join(f"{s} {n}" for s, n in table.extra["missing"].items()))
     if not table.extra["determined"]:
         print("warning: the data do not determine every parameter; values are NaN where undetermined",
               file=sys.stderr)
