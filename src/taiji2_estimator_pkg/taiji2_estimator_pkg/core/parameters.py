@@ -42,7 +42,7 @@ _VALIDATION = {
 DEFAULTS: dict[str, dict[str, Any]] = {
     "scale_factor_estimator": {
         "layout": "type1", "method": "gls", "grs_ids": [1, 2], "gate_probability": 1e-6,
-        "max_bridged_gap_s": 10.0, "gap_acceleration_sigma_rad_s2": 1e-8, "snap_tolerance": 1e-10,
+        "max_bridged_gap_s": 10.0, "gap_acceleration_sigma_rad_s2": 1e-9, "snap_tolerance": 1e-10,
         "determination_margin": 20.0, "paper.window": 2001, "paper.polyorder": 2,
         "paper.initial_sigma_fraction": 0.1, "paper.gate_probability": 0.0, **_VALIDATION,
         "checkpoint_file": "", "checkpoint_period_s": 10.0,
