@@ -86,15 +86,21 @@ def test_unusual_messages_fall_back_or_are_reported():
     assert decoded.columns["header.frame_id"][3] == b"tmrf1"
 
 
-@pytest.mark.parametrize("storage,compress", [("mcap", False), ("mcap", True), ("sqlite3", False)])
+@pytest.mark.parametrize("storage,compress", [("mcap", None), ("mcap", CompressionMode.STORAGE), ("sqlite3", None),
+                                              ("mcap", CompressionMode.MESSAGE), ("sqlite3", CompressionMode.MESSAGE),
+                                              ("sqlite3", CompressionMode.FILE)],
+                         ids=["mcap", "mcap-chunks-zstd", "sqlite3", "mcap-message-zstd", "sqlite3-message-zstd",
+                              "sqlite3-file-zstd"])
 def test_read_raw_messages_equals_rosbags_reader(tmp_path, storage, compress):
+    """Every storage and rosbag2 compression mode (chunks; each message, as `ros2 bag record
+    --compression-mode message` writes; the whole file)."""
     store = typestore()
     bag = tmp_path / "bag"
     rng = np.random.default_rng(3)
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     writer = Writer(bag, version=9, storage_plugin=plugin)
-    if compress:
-        writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    if compress is not None:
+        writer.set_compression(compress, CompressionFormat.ZSTD)
     writer.open()
     connections = {t: writer.add_connection(f"/t{i}", t, typestore=store) for i, t in enumerate(TYPES[:3])}
     for k in range(3000):
