@@ -510,6 +510,16 @@ class ScaleFactorEstimator:
         self._held = (regressor, present)
         return regressor
 
+    def _step_input(self, diffs: Mapping[int, np.ndarray], present: tuple[int, ...]
+                    ) -> tuple[np.ndarray | None, np.ndarray | None, tuple[int, ...]]:
+        """(input regressor, process noise (None: the nominal one), GRS) of a step with the GRS
+        ``present``: their input, held for later steps; without any, the held one (:meth:`_held_input`)."""
+        if not present:
+            return self._held_input()
+        q_step = None if len(present) == len(self.grs_ids) else \
+            self.model.process_noise_model(present, self.options.gap_acceleration_sigma_rad_s2)
+        return self._hold(diffs, present), q_step, present
+
     def _hold_present(self, epochs: _EpochArrays, grs_present: np.ndarray, k: int) -> None:
         """:meth:`_hold` of epoch ``k`` of a batch if it has GRS data (as :meth:`update` holds every such epoch)."""
         present = tuple(g for j, g in enumerate(self.grs_ids) if grs_present[k, j])
@@ -616,12 +626,7 @@ class ScaleFactorEstimator:
                 self.n_diff += 1
         phi = None if q_ok is None else self.attitude.add(q_ok)
         y = None if phi is None else self.model.to_model @ phi
-        if present:
-            regressor = self._hold(diffs, present)
-            q_step = None if len(present) == len(self.grs_ids) else \
-                self.model.process_noise_model(present, self.options.gap_acceleration_sigma_rad_s2)
-        else:
-            regressor, q_step, present = self._held_input()
+        regressor, q_step, present = self._step_input(diffs, present)
         fresh = self.filter.fresh
         info = self.filter.step(y, None, None, regressor, q=q_step, gate=self.gate if ok else None,
                                 estimate=estimate)
@@ -741,12 +746,7 @@ class ScaleFactorEstimator:
                 k = start
                 present = tuple(g for j, g in enumerate(self.grs_ids) if grs_present[k, j])
                 diffs = {g: epochs.diffs[k, j] for j, g in enumerate(self.grs_ids)}
-                if present:
-                    regressor = self._hold(diffs, present)
-                    q_step = None if len(present) == len(self.grs_ids) else \
-                        model.process_noise_model(present, self.options.gap_acceleration_sigma_rad_s2)
-                else:
-                    regressor, q_step, present = self._held_input()
+                regressor, q_step, present = self._step_input(diffs, present)
                 fresh = self.filter.fresh
                 self.filter.step(y_all[k] if st_present[k] else None, None, None, regressor, q=q_step)
                 if present and not fresh:
@@ -832,12 +832,7 @@ class ScaleFactorEstimator:
                 k = start
                 present = tuple(g for j, g in enumerate(self.grs_ids) if grs_present[k, j])
                 diffs = {g: epochs.diffs[k, j] for j, g in enumerate(self.grs_ids)}
-                if present:
-                    regressor = self._hold(diffs, present)
-                    q_step = None if len(present) == len(self.grs_ids) else \
-                        model.process_noise_model(present, self.options.gap_acceleration_sigma_rad_s2)
-                else:
-                    regressor, q_step, _ = self._held_input()
+                regressor, q_step, _ = self._step_input(diffs, present)
                 result = self.filter.step(y_all[k] if st_present[k] else None, None,
                                           None if regressor is None else regressor @ g_hat, None, q=q_step)
                 states[k] = result.state
