@@ -28,6 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     started = time.perf_counter()
+    from taiji2_runtime.threads import limit_blas_threads
+
+    limit_blas_threads()  # before any BLAS work: one BLAS thread (docs/threads.md)
     from taiji2_estimator_pkg.calibration import align_streams, calibrate
     from taiji2_estimator_pkg.core.instrument import InstrumentModel
     from taiji2_estimator_pkg.io import load_raw_bag

@@ -76,6 +76,9 @@ def _fit(problem: Any, fam: Any, x: np.ndarray, duration_s: float, constraints: 
 
 def main(args: argparse.Namespace) -> int:
     """Run ``taiji2 design``."""
+    from taiji2_runtime.threads import limit_blas_threads
+
+    limit_blas_threads()  # before any BLAS work: one BLAS thread (docs/threads.md)
     import numpy as np
 
     from taiji2_estimator_pkg.design.evaluate import PARAMETER_NAMES, DesignProblem

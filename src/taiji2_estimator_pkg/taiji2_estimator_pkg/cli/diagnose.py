@@ -79,6 +79,9 @@ def _load_bag(path: Path, sample_rate_hz: float) -> Any:
 
 def main(args: argparse.Namespace) -> int:
     """Run the diagnosis; returns the exit status."""
+    from taiji2_runtime.threads import limit_blas_threads
+
+    limit_blas_threads()  # before any BLAS work: one BLAS thread (docs/threads.md)
     from taiji2_estimator_pkg.diagnosis import FAMILIES, DiagnosisOptions, diagnose, write_report
     from taiji2_sim_pkg.core.config import load_config
 

@@ -116,6 +116,9 @@ def _stop(procs: dict[str, subprocess.Popen], recorder_timeout_s: float) -> str 
 
 
 def main(args: argparse.Namespace) -> int:
+    from taiji2_runtime.threads import limit_blas_threads
+
+    limit_blas_threads()  # before any BLAS work: one BLAS thread (docs/threads.md)
     import tempfile
 
     from taiji2_estimator_pkg.report import EstimateTable, format_table

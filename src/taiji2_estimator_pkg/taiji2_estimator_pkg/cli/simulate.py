@@ -53,6 +53,9 @@ def _effect(text: str) -> dict[str, Any]:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``taiji2 simulate``."""
+    from taiji2_runtime.threads import limit_blas_threads
+
+    limit_blas_threads()  # before any BLAS work: one BLAS thread (docs/threads.md)
     import numpy as np
     import yaml
 

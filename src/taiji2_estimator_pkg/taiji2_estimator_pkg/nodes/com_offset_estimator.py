@@ -22,6 +22,7 @@ from taiji2_estimator_pkg.core.parameters import com_offset_options, paper_com_o
 from taiji2_estimator_pkg.nodes import common
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages
+from taiji2_runtime.threads import limit_blas_threads
 
 GRS_IDS = (1, 2)
 STREAMS = ("grs1", "grs2")
@@ -214,6 +215,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
+    limit_blas_threads()  # one BLAS thread (docs/threads.md)
     return run_node(ComOffsetEstimatorNode, args)
 
 

@@ -21,6 +21,7 @@ from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorFilter, Scale
 from taiji2_estimator_pkg.nodes import common
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages
+from taiji2_runtime.threads import limit_blas_threads
 
 GRS_IDS = (1, 2)
 STREAMS = ("star_tracker", "grs1", "grs2")
@@ -147,6 +148,7 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
+    limit_blas_threads()  # one BLAS thread (docs/threads.md)
     return run_node(ScaleFactorEstimatorNode, args)
 
 
