@@ -109,9 +109,9 @@ def baseline_in_process(path: Path) -> int:
     return count
 
 
-def timed_process(argv: list[str]) -> float:
+def timed_process(argv: list[str], env: dict[str, str] | None = None) -> float:
     start = time.perf_counter()
-    proc = subprocess.run(argv, capture_output=True, text=True, timeout=600, env=PROCESS_ENV)
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=600, env=env or PROCESS_ENV)
     elapsed = time.perf_counter() - start
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(argv)} failed: {proc.stderr.strip()[-400:]}")
