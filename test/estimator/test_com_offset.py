@@ -36,7 +36,10 @@ def test_recursive_equals_bulk_for_given_rate_and_scale_factors():
     rec = co.estimate(scale_factors)
     assert bulk.determined and rec.determined
     assert np.all(np.abs(rec.values - bulk.values) < 1e-5 * bulk.sigma)
-    np.testing.assert_allclose(rec.covariance, bulk.covariance, rtol=1e-6)
+    # each element relative to sqrt(C_ii C_jj): a small off-diagonal element carries the rounding of
+    # the large ones it is the difference of (the joint solution inverts a 33 x 33 information)
+    scale = np.sqrt(np.outer(np.diag(bulk.covariance), np.diag(bulk.covariance)))
+    assert np.max(np.abs(rec.covariance - bulk.covariance) / scale) < 1e-6
     nis = np.array([r.nis for r in reports])
     assert 0.9 < np.nanmean(nis[len(nis) // 2:]) / 6.0 < 1.1
     # scale-factor uncertainty is propagated: total covariance exceeds the G-exact one

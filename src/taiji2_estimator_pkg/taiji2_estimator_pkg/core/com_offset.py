@@ -46,6 +46,7 @@ from .attitude import SmoothingDerivative
 from .estimate_blocks import PerGrsBlocks
 from .factored_steady import RegressorFactors
 from .instrument import LINEAR_FROM_ANGULAR, InstrumentModel, angular_differences, linear_scale_factors, linear_sums
+from .joint_com_offset import solve_joint
 from .kalman import KalmanFilter, chi2_gate
 from .scale_factor import ScaleFactorEstimate, ScaleFactorModel, _EpochArrays
 from .twostage import StateSpaceModel, TwoStageFilter, solve_information
@@ -92,7 +93,8 @@ class ComOffsetEstimate(PerGrsBlocks):
     values : numpy.ndarray
         (3 n_grs,) d_i stacked [m].
     covariance : numpy.ndarray
-        (3 n_grs, 3 n_grs) total covariance, scale-factor uncertainty included [m^2].
+        (3 n_grs, 3 n_grs) total covariance, scale-factor uncertainty included [m^2] (joint
+        estimator: of the joint estimate; two-stage: ``P_d|G + J P_G J^T``).
     covariance_given_scale_factors : numpy.ndarray
         (3 n_grs, 3 n_grs) covariance if the scale factors were exact [m^2].
     scale_factor_jacobian : numpy.ndarray
@@ -109,6 +111,13 @@ class ComOffsetEstimate(PerGrsBlocks):
         Rejected inputs per stream and reason.
     method : str
         ``"gls"`` or ``"paper"``.
+    scale_factors_joint : numpy.ndarray or None
+        (3 n_grs,) G re-estimated jointly with d (the linear channels' information added; joint
+        estimator only) [rad s^-2 V^-1].
+    scale_factor_cross_covariance : numpy.ndarray or None
+        (3 n_grs, 3 n_grs) Cov(d, G joint) [m rad s^-2 V^-1].
+    scale_factor_covariance_joint : numpy.ndarray or None
+        (3 n_grs, 3 n_grs) Cov(G joint).
     """
 
     grs_ids: tuple[int, ...]
@@ -122,6 +131,9 @@ class ComOffsetEstimate(PerGrsBlocks):
     nis_mean: float
     rejected: dict[str, dict[str, int]] = field(default_factory=dict)
     method: str = "gls"
+    scale_factors_joint: np.ndarray | None = None
+    scale_factor_cross_covariance: np.ndarray | None = None
+    scale_factor_covariance_joint: np.ndarray | None = None
 
 
     def difference(self) -> tuple[np.ndarray, np.ndarray]:
@@ -139,6 +151,10 @@ class ComOffsetEstimate(PerGrsBlocks):
                "scale_factor_jacobian": self.scale_factor_jacobian.tolist(), "determined": self.determined,
                "t_s": self.t_s, "n_samples": self.n_samples, "nis_mean": self.nis_mean,
                "rejected": self.rejected, "method": self.method}
+        for key in ("scale_factors_joint", "scale_factor_cross_covariance", "scale_factor_covariance_joint"):
+            value = getattr(self, key)
+            if value is not None:
+                out[key] = value.tolist()
         if len(self.grs_ids) == 2:
             diff, cov = self.difference()
             out["difference"] = diff.tolist()
@@ -155,6 +171,9 @@ class ComOffsetOptions:
     detrend : str
         Per-GRS nuisance regression: ``"linear"`` (bias and trend, the paper's Gamma t + Lambda),
         ``"constant"`` (bias only) or ``"none"``.
+    joint : bool
+        Estimate d jointly with G from every channel (:mod:`.joint_com_offset`, default; reaches the
+        full bound), or the two-stage ``d(G^)`` with ``P_d|G + J P_G J^T`` (False).
     trend_time_scale_s : float
         Time unit of the trend regressor [s] (conditioning only).
     gate_probability : float or None
@@ -169,6 +188,7 @@ class ComOffsetOptions:
     """
 
     detrend: str = "linear"
+    joint: bool = True
     trend_time_scale_s: float = 1000.0
     gate_probability: float | None = 1e-6
     snap_tolerance: float = 1e-10
@@ -272,14 +292,42 @@ class ComOffsetModel:
         self.n_nuisance = per_grs * n_grs
         self.n_beta = self.n_d + self.n_nuisance
         self.n_g = 3 * n_grs
-        # basis columns: data bases (n_g) | X0 (n_beta) | X^(j) d-blocks (n_g * n_d)
+        # basis columns: data bases (n_g) | X0 (n_beta) | X^(j) d-blocks (n_g * n_d) | data Jacobian (n_g)
         self.col_data = slice(0, self.n_g)
         self.col_x0 = slice(self.n_g, self.n_g + self.n_beta)
         self.col_xj = [slice(self.n_g + self.n_beta + j * self.n_d, self.n_g + self.n_beta + (j + 1) * self.n_d)
                        for j in range(self.n_g)]
-        self.n_columns = self.n_g + self.n_beta + self.n_g * self.n_d
+        start = self.n_g + self.n_beta + self.n_g * self.n_d
+        self.col_jac = slice(start, start + self.n_g)
+        self.n_columns = start + self.n_g
         self.ratio = instrument.linear_ratio_m
         self.q_fused = q_fused
+        # nominal G and d: the mean of dz/dG (joint estimator; see data_jacobian_patterns)
+        self.g_nominal = np.concatenate([instrument.nominal_scale_factors[g] for g in self.grs_ids])
+        self.d_nominal = [np.asarray(d, dtype=np.float64) for d in d_nom]
+        # per-sample variance of each voltage-difference series u_ij [V^2] (angular readout / G^2)
+        self.diff_variance = np.concatenate([noise.angular_readout_variance() for _ in self.grs_ids]) \
+            / self.g_nominal ** 2
+        self.data_jacobian_projections = self._data_jacobian_projections()
+
+    def _data_jacobian_projections(self) -> list[tuple[int, np.ndarray]]:
+        """Per scale factor G_j: (GRS index i, ``C_i^T e_a e_a^T C_i / G_j``), a the linear axis read through G_j.
+
+        ``z_i = C_i^T diag(r G_i,perm) s_i``, so ``dz_i/dG_j = C_i^T e_a r s_i,a`` whose mean is
+        ``C_i^T e_a e_a^T C_i (A~ d_i) / G_j``: the data column of G_j with its noise (the common
+        spacecraft acceleration above all) replaced by the model's mean. The joint estimator uses
+        this mean Jacobian (:mod:`.joint_com_offset`): the noise part would carry information on G
+        through the noise level and the assumed linear/angular ratio r (second moments), which
+        neither the bound nor real hardware supports. Evaluated at the nominal G and d (mm-level
+        knowledge of d changes it by < 1e-2: efficiency, not consistency).
+        """
+        out = []
+        for i, g in enumerate(self.grs_ids):
+            c = self.c[g]
+            for j in range(3):
+                row = c[_LINEAR_AXIS_OF_ANGULAR[j]]
+                out.append((i, np.outer(row, row) / self.g_nominal[3 * i + j]))
+        return out
 
     # basis series ---------------------------------------------------------------------------
     def basis(self, sums: np.ndarray, diffs: np.ndarray, omega: np.ndarray, tau: np.ndarray,
@@ -343,6 +391,10 @@ class ComOffsetModel:
                 cols = self.col_xj[3 * i + j]
                 for k in range(n_grs):
                     out[:, 3 * k:3 * k + 3, cols.start + 3 * k:cols.start + 3 * k + 3] = block
+                for jj, (k, projection) in enumerate(self.data_jacobian_projections):
+                    # g_s P_jj (omega_dot^(s) x d_k), the series' share of the mean of dz/dG_jj
+                    out[:, 3 * k:3 * k + 3, self.col_jac.start + jj] += self.g_nominal[3 * i + j] * (
+                        (block @ self.d_nominal[k]) @ projection.T)
         return out
 
     def basis_factors(self, sums: np.ndarray, diffs: np.ndarray, omega: np.ndarray,
@@ -395,6 +447,9 @@ class ComOffsetModel:
                 cols = self.col_xj[3 * i + j]
                 for k in range(n_grs):
                     pattern[3 * k:3 * k + 3, cols.start + 3 * k:cols.start + 3 * k + 3] = block
+                for jj, (k, projection) in enumerate(self.data_jacobian_projections):
+                    pattern[3 * k:3 * k + 3, self.col_jac.start + jj] += self.g_nominal[3 * i + j] * (
+                        projection @ block @ self.d_nominal[k])
         return RegressorFactors(np.column_stack(series), np.stack(patterns))
 
     def residual(self, sums: np.ndarray, diffs: np.ndarray, omega: np.ndarray, tau: np.ndarray, g: np.ndarray,
@@ -445,29 +500,35 @@ class ComOffsetModel:
             a_x[self.col_xj[j], :self.n_d] = g[j] * np.eye(self.n_d)
         return a_y, a_x
 
-    def eiv_correction(self, lambda_inv: np.ndarray, rows: np.ndarray | None = None,
-                       q_omega_dot: np.ndarray | None = None) -> np.ndarray:
-        """(n_d, n_d) ``E[X_e^T Lambda^-1 X_e]`` of one epoch (omega_dot^ noise in the regressor).
+    def eiv_correction(self, lambda_inv: np.ndarray, present: np.ndarray | None = None) -> np.ndarray:
+        """(n_columns, n_columns) ``E[B_e^T Lambda^-1 B_e]`` of one epoch: the readout noise of the
+        voltage differences in the basis columns (errors in variables).
 
-        ``X_e = blockdiag([e x], ...)`` on the d columns, ``e ~ N(0, Q)``, Q = ``q_omega_dot``
-        (default the fused Q_f).
+        The columns built from the voltage differences (the ``omega_dot^`` regressors and the data
+        Jacobian) carry its white noise ``n_s`` (variance :attr:`diff_variance`), so their
+        cross-products are inflated by ``sum_s var_s P_s^T Lambda^-1 P_s`` (``P_s`` the pattern of
+        series s); subtracting it makes every normal matrix and score built from the columns
+        unbiased (corrected least squares), whatever combination of G and d they are taken at.
+
+        Parameters
+        ----------
+        lambda_inv : numpy.ndarray
+            Inverse innovation covariance of the rows present [(m s^-2)^-2].
+        present : numpy.ndarray, optional
+            (n_grs,) GRS present (default all); ``lambda_inv`` is then over their rows.
         """
-        q_e = self.q_fused if q_omega_dot is None else q_omega_dot
-        m = self.m
-        units = [cross_matrix(np.eye(3)[a]) for a in range(3)]
-        blocks = []
-        for a in range(3):
-            e_a = np.zeros((m, self.n_d))
-            for i in range(self.n_grs):
-                e_a[3 * i:3 * i + 3, 3 * i:3 * i + 3] = units[a]
-            if rows is not None:
-                e_a = e_a[rows]
-            blocks.append(e_a)
-        out = np.zeros((self.n_d, self.n_d))
-        for a in range(3):
-            for b in range(3):
-                if q_e[a, b] != 0.0:
-                    out += q_e[a, b] * blocks[a].T @ lambda_inv @ blocks[b]
+        present = np.ones(self.n_grs, dtype=bool) if present is None else np.asarray(present, dtype=bool)
+        rows = np.repeat(present, 3)
+        zeros = np.zeros((1, self.n_grs, 3))
+        still = self.basis(zeros, zeros, np.zeros((1, 3)), np.zeros(1), present[None, :])[0]
+        out = np.zeros((self.n_columns, self.n_columns))
+        for s, variance in enumerate(self.diff_variance):
+            if not present[s // 3]:
+                continue
+            unit = np.zeros((1, self.n_grs, 3))
+            unit[0, s // 3, s % 3] = 1.0
+            pattern = (self.basis(zeros, unit, np.zeros((1, 3)), np.zeros(1), present[None, :])[0] - still)[rows]
+            out += variance * pattern.T @ lambda_inv @ pattern
         return 0.5 * (out + out.T)
 
 
@@ -541,7 +602,7 @@ class ComOffsetEstimator:
         self.gate = None if self.options.gate_probability is None else chi2_gate(self.model.m,
                                                                                   self.options.gate_probability)
         self.eiv_full = self.model.eiv_correction(self.filter.lambda_inv_ss)
-        self.eiv_sum = np.zeros((self.model.n_d, self.model.n_d))
+        self.eiv_sum = np.zeros((self.model.n_columns, self.model.n_columns))
         self.n_eiv = 0
         self.t0_s: float | None = None
         self.t_last_s = float("nan")
@@ -549,11 +610,19 @@ class ComOffsetEstimator:
         self.determined = False
 
     # solution for given scale factors --------------------------------------------------------
+    def corrected_information(self) -> np.ndarray:
+        """(q, q) cross-product of the whitened basis columns (and SRP initial state), less the
+        expected errors-in-variables part: unbiased for any combination of the columns."""
+        info = self.filter.info.copy()
+        n = self.model.n_columns
+        info[:n, :n] -= self.eiv_sum
+        return info
+
     def _beta_system(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Information and vector on (beta, x0) for scale factors g, with the EIV correction."""
         model = self.model
         q = self.filter.q_total
-        info_all = self.filter.info
+        info_all = self.corrected_information()
         a_y, a_x = model.combination(np.asarray(g, dtype=np.float64))
         # append the SRP initial-state columns (x0) of the engine
         a_xx = np.zeros((q, model.n_beta + 3))
@@ -562,7 +631,6 @@ class ComOffsetEstimator:
         a_yy = np.zeros(q)
         a_yy[:model.n_columns] = a_y
         info = a_xx.T @ info_all @ a_xx
-        info[:model.n_d, :model.n_d] -= self.eiv_sum
         vec = a_xx.T @ info_all @ a_yy
         return 0.5 * (info + info.T), vec, a_xx, a_yy
 
@@ -572,7 +640,9 @@ class ComOffsetEstimator:
         beta, cov, full = solve_information(info, vec)
         if full and not self.determined:
             n_d = self.model.n_d
-            fluctuation = math.sqrt(2.0 * max(self.n_eiv, 1)) * np.diag(self.eiv_full)
+            _, a_x = self.model.combination(np.asarray(g, dtype=np.float64))
+            eiv_d = (a_x.T @ self.eiv_full @ a_x)[:n_d, :n_d]
+            fluctuation = math.sqrt(2.0 * max(self.n_eiv, 1)) * np.diag(eiv_d)
             scale = np.sqrt(fluctuation)
             largest = float(np.linalg.eigvalsh(cov[:n_d, :n_d] * scale[:, None] * scale[None, :])[-1])
             self.determined = largest > 0.0 and 1.0 / largest > self.options.determination_margin
@@ -584,7 +654,7 @@ class ComOffsetEstimator:
         model = self.model
         info, vec, a_xx, a_yy = self._beta_system(g)
         beta, cov, _ = solve_information(info, vec)
-        info_all = self.filter.info
+        info_all = self.corrected_information()
         jac = np.zeros((model.n_d, model.n_g))
         for j in range(model.n_g):
             da_x = np.zeros_like(a_xx)
@@ -622,6 +692,16 @@ class ComOffsetEstimator:
         cov_noise = cov[:n_d, :n_d]
         cov_total = cov_noise + jac @ p_g @ jac.T
         info, _, a_xx, a_yy = self._beta_system(g)
+        g_joint = cov_gd = cov_gg = None
+        n_g = self.model.n_g
+        if self.options.joint and np.all(np.isfinite(p_g)) and np.all(np.linalg.eigvalsh(p_g) > 0.0):
+            joint = solve_joint(self.model, self.corrected_information(), g, p_g, beta)
+            beta = joint.beta
+            g_joint = joint.g
+            cov_total = joint.covariance[n_g:n_g + n_d, n_g:n_g + n_d]
+            cov_gd = joint.covariance[n_g:n_g + n_d, :n_g].copy()
+            cov_gg = joint.covariance[:n_g, :n_g].copy()
+            _, _, a_xx, a_yy = self._beta_system(g_joint)
         w = a_yy - a_xx @ beta
         chi2 = float(w @ self.filter.info @ w)
         dof = max(self.filter.dof_total - info.shape[0], 1)
@@ -629,7 +709,9 @@ class ComOffsetEstimator:
         if self.filter.n_rejected:
             rejected.setdefault("epoch", {})["gated"] = self.filter.n_rejected
         return ComOffsetEstimate(self.grs_ids, beta[:n_d].copy(), 0.5 * (cov_total + cov_total.T), cov_noise,
-                                 jac, True, self.t_last_s, self.filter.n_updates, chi2 / dof, rejected)
+                                 jac, True, self.t_last_s, self.filter.n_updates, chi2 / dof, rejected,
+                                 scale_factors_joint=g_joint, scale_factor_cross_covariance=cov_gd,
+                                 scale_factor_covariance_joint=cov_gg)
 
     def _scale_factors(self, scale_factors: ScaleFactorEstimate | tuple[ArrayLike, ArrayLike]
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -670,7 +752,7 @@ class ComOffsetEstimator:
         grs = self.grs_ids[int(np.flatnonzero(present)[0])]
         r = model.r_single[grs]
         # weight of the EIV term: R^-1 of the rows present (the common-mode state term is negligible)
-        eiv = model.eiv_correction(np.linalg.inv(r[np.ix_(rows, rows)]), rows, model.q_single[grs])
+        eiv = model.eiv_correction(np.linalg.inv(r[np.ix_(rows, rows)]), present)
         return rows, r, eiv
 
     def _tau(self, t_s: float) -> float:

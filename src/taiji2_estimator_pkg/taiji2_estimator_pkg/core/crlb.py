@@ -18,8 +18,16 @@ Scale factors
 c.m. offsets
     Data: GRS linear readouts (white readout noise), common spacecraft acceleration (white thruster
     force noise, SRP Ornstein-Uhlenbeck), bias and trend per GRS, and the angular acceleration known
-    only through the GRS (its noise enters as ``[d x] e``). ``given_scale_factors`` is the bound
-    with G exact; the bound for d with G from its own bound adds ``J P_G J^T``, J = dd/dG.
+    only through the GRS (its noise enters as ``[d x] e``). Three bounds:
+
+    - **full** (default, ``com_offset_covariance``): G1, G2, d1, d2 and the nuisances jointly from
+      the star tracker and every GRS channel: the information of the scale-factor stage on G plus
+      that of the linear channels on (G, d) (:mod:`.joint_com_offset`, the same equations as the
+      joint estimator). The linear channels see G through ``omega_dot^(G) x d`` and the data scale
+      ``r G``: they pin ratios of the components of G jointly with d.
+    - **two-stage** (``com_offset_covariance_two_stage``): ``P_d|G + J P_G J^T``, J = dd/dG, what an
+      estimator reaches that takes G from the angular channels alone and then d.
+    - **G exact** (``com_offset_covariance_given_scale_factors``).
 
 An independent frequency-domain (Whittle) approximation of the single-GRS scale-factor information
 is given for cross-checking (:func:`whittle_scale_factor_information`).
@@ -36,6 +44,7 @@ from numpy.typing import ArrayLike
 
 from .com_offset import ComOffsetEstimator, ComOffsetOptions, cross_matrix
 from .instrument import InstrumentModel, linear_scale_factors
+from .joint_com_offset import joint_information
 from .scale_factor import ScaleFactorEstimator, ScaleFactorOptions
 from .twostage import solve_information
 from .validation import ValidationOptions
@@ -69,9 +78,15 @@ class CrlbResult:
     com_offset_covariance_given_scale_factors : numpy.ndarray
         (3 n, 3 n) bound on Cov(d) with G exact [m^2].
     com_offset_covariance : numpy.ndarray
-        (3 n, 3 n) bound with G estimated at its own bound (two-stage) [m^2].
+        (3 n, 3 n) full bound: G and d jointly from every channel [m^2].
     scale_factor_jacobian : numpy.ndarray
         (3 n, 3 n) dd/dG at the truth.
+    com_offset_covariance_two_stage : numpy.ndarray
+        (3 n, 3 n) two-stage bound ``P_d|G + J P_G J^T`` [m^2].
+    scale_factor_covariance_full : numpy.ndarray
+        (3 n, 3 n) full bound on G (the linear channels' information added); ``scale_factor_covariance``
+        is the bound of the scale-factor stage (star tracker and angular channels), which the
+        published G reaches.
     """
 
     grs_ids: tuple[int, ...]
@@ -82,6 +97,8 @@ class CrlbResult:
     com_offset_covariance_given_scale_factors: np.ndarray
     com_offset_covariance: np.ndarray
     scale_factor_jacobian: np.ndarray
+    com_offset_covariance_two_stage: np.ndarray
+    scale_factor_covariance_full: np.ndarray
 
     @property
     def scale_factor_sigma(self) -> np.ndarray:
@@ -95,18 +112,38 @@ class CrlbResult:
 
     @property
     def com_offset_sigma(self) -> np.ndarray:
-        """(3 n,) [m], G from its bound."""
+        """(3 n,) [m], full bound (G and d jointly)."""
         return np.sqrt(np.diag(self.com_offset_covariance))
+
+    @property
+    def com_offset_sigma_two_stage(self) -> np.ndarray:
+        """(3 n,) [m], two-stage bound (G from the angular channels, then d)."""
+        return np.sqrt(np.diag(self.com_offset_covariance_two_stage))
+
+    def scaled(self, factor: float, duration_s: float) -> CrlbResult:
+        """The bounds of a record ``1/factor`` times as informative (every covariance times factor)."""
+        return CrlbResult(self.grs_ids, duration_s, self.scale_factors, factor * self.scale_factor_covariance,
+                          self.com_offsets, factor * self.com_offset_covariance_given_scale_factors,
+                          factor * self.com_offset_covariance, self.scale_factor_jacobian,
+                          factor * self.com_offset_covariance_two_stage, factor * self.scale_factor_covariance_full)
 
     @property
     def com_offset_sigma_given_scale_factors(self) -> np.ndarray:
         """(3 n,) [m], G exact."""
         return np.sqrt(np.diag(self.com_offset_covariance_given_scale_factors))
 
-    def difference_sigma(self, given_scale_factors: bool = False) -> np.ndarray:
-        """(3,) bound on the sigma of d_1 - d_2 [m] (two GRS)."""
+    def difference_sigma(self, given_scale_factors: bool = False, bound: str = "full") -> np.ndarray:
+        """(3,) bound on the sigma of d_1 - d_2 [m] (two GRS); ``bound`` ``"full"`` or ``"two_stage"``
+        (``given_scale_factors``: G exact)."""
         t = np.hstack((np.eye(3), -np.eye(3)))
-        cov = self.com_offset_covariance_given_scale_factors if given_scale_factors else self.com_offset_covariance
+        if given_scale_factors:
+            cov = self.com_offset_covariance_given_scale_factors
+        elif bound == "two_stage":
+            cov = self.com_offset_covariance_two_stage
+        elif bound == "full":
+            cov = self.com_offset_covariance
+        else:
+            raise ValueError(f"bound: 'full' or 'two_stage', got {bound!r}")
         return np.sqrt(np.diag(t @ cov @ t.T))
 
     def to_dict(self) -> dict[str, Any]:
@@ -114,10 +151,14 @@ class CrlbResult:
         out = {"grs_ids": list(self.grs_ids), "duration_s": self.duration_s,
                "scale_factor_sigma": self.scale_factor_sigma.tolist(),
                "scale_factor_relative_sigma": self.scale_factor_relative_sigma.tolist(),
+               "scale_factor_relative_sigma_full": (np.sqrt(np.diag(self.scale_factor_covariance_full))
+                                                    / self.scale_factors).tolist(),
                "com_offset_sigma_m": self.com_offset_sigma.tolist(),
+               "com_offset_sigma_two_stage_m": self.com_offset_sigma_two_stage.tolist(),
                "com_offset_sigma_given_scale_factors_m": self.com_offset_sigma_given_scale_factors.tolist()}
         if len(self.grs_ids) == 2:
             out["difference_sigma_m"] = self.difference_sigma().tolist()
+            out["difference_sigma_two_stage_m"] = self.difference_sigma(bound="two_stage").tolist()
             out["difference_sigma_given_scale_factors_m"] = self.difference_sigma(True).tolist()
         return out
 
@@ -208,8 +249,14 @@ def crlb(instrument: InstrumentModel, t_s: ArrayLike, omega_dot: ArrayLike, omeg
     cov_d_given = cov_beta[:n_d, :n_d]
     jac = co.jacobian(g_true)
     cov_d = cov_d_given + jac @ cov_g @ jac.T
+    # full bound: the joint information on (G, beta) at the truth, the G stage's information as prior
+    beta_true, _, _ = co.solve(g_true)
+    g_information, _, _ = solve_information(cov_g, np.eye(p))
+    hessian, _, _ = joint_information(co.model, co.corrected_information(), g_true, beta_true, g_information)
+    _, cov_joint, _ = solve_information(hessian, np.zeros(hessian.shape[0]))
+    cov_joint = 0.5 * (cov_joint + cov_joint.T)
     return CrlbResult(grs_ids, float(t[-1] - t[0] + (t[1] - t[0] if t.size > 1 else 0.0)), g_true, cov_g, d_true,
-                      cov_d_given, 0.5 * (cov_d + cov_d.T), jac)
+                      cov_d_given, cov_joint[p:p + n_d, p:p + n_d], jac, 0.5 * (cov_d + cov_d.T), cov_joint[:p, :p])
 
 
 def noise_free_signals(layout: Any, duration_s: float | None = None,

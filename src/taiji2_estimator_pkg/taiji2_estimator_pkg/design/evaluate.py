@@ -145,10 +145,7 @@ class DesignProblem:
         if window_s == duration_s:
             return result
         # information grows as T for a stationary (periodic) maneuver: Cov(T) = Cov(W) W / T
-        k = window_s / duration_s
-        return CrlbResult(result.grs_ids, duration_s, result.scale_factors, k * result.scale_factor_covariance,
-                          result.com_offsets, k * result.com_offset_covariance_given_scale_factors,
-                          k * result.com_offset_covariance, result.scale_factor_jacobian)
+        return result.scaled(window_s / duration_s, duration_s)
 
     def ratios(self, maneuver: Any, duration_s: float, period_s: float | None = None,
                fast: bool = False) -> np.ndarray:
