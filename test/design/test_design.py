@@ -112,9 +112,11 @@ def test_bad_maneuver_file_is_one_line_naming_the_key(tmp_path):
 def test_design_cli_writes_the_files_and_beats_or_matches_the_paper(tmp_path):
     out = tmp_path / "d"
     status = taiji2(["design", "--layout", "type1", "--family", "square", "--duration-s", "500",
-                     "--budget-s", "1", "--no-plots", "--out", str(out)])
+                     "--max-evaluations", "10", "--no-plots", "--out", str(out)])
     assert status == 0
     report = json.loads((out / "report.json").read_text())
+    assert report["search"]["evaluations"] == 10 and not report["search"]["truncated"]
+    assert "Search: complete" in (out / "report.md").read_text()
     for key in ("design", "paper"):
         assert list(report[key]["crlb_over_requirement"]) == list(PARAMETER_NAMES)
     # the paper's preset is in the initial population: the design can only be better (full bounds,
@@ -128,20 +130,102 @@ def test_design_cli_writes_the_files_and_beats_or_matches_the_paper(tmp_path):
 
 
 def test_a_spent_budget_evaluates_no_more_candidates(problem):
-    """The budget is checked before every evaluation, not only once per generation (a generation of
-    the square family is 2 x 21 candidates of a bound each): with no budget nothing is evaluated and
-    the search returns its start, the paper's preset."""
+    """The wall-clock cap is checked before every evaluation, not only once per generation (a
+    generation of the square family is 32 candidates of a bound each): with no time nothing is
+    evaluated, the search returns its start, the paper's preset, and says it was truncated."""
     from taiji2_estimator_pkg.design.optimize import optimize
 
     lines: list[str] = []
     result = optimize(problem, "square", 1000.0, Constraints(), seed=1, budget_s=0.0, progress=lines.append)
-    assert result.evaluations == 0
+    assert result.evaluations == 0 and result.truncated
+    np.testing.assert_array_equal(result.x, _paper_start(problem))
+    assert any("0 evaluations" in line for line in lines)
+    assert "truncated" in lines[-1]
+
+
+def _paper_start(problem: DesignProblem) -> np.ndarray:
     paper = problem.config.maneuver
     fam = family("square")
-    start = np.clip(fam.paper_start(paper.period_s, paper.amplitude_n_m, paper.phase_s),
-                    [b[0] for b in fam.bounds], [b[1] for b in fam.bounds])
-    np.testing.assert_array_equal(result.x, start)
-    assert lines and "0 evaluations" in lines[-1]
+    return np.clip(fam.paper_start(paper.period_s, paper.amplitude_n_m, paper.phase_s),
+                   [b[0] for b in fam.bounds], [b[1] for b in fam.bounds])
+
+
+def test_same_seed_gives_the_same_design_however_slow_the_clock(problem, monkeypatch):
+    """The search is bounded by evaluations, not by wall time: the same seed gives the bit-identical
+    design with the real clock and with a clock that runs 30 s per reading (a machine hundreds of
+    times slower), as long as the wall-clock cap is not hit; when it is, the result says truncated."""
+    import types
+
+    import taiji2_estimator_pkg.design.optimize as optimize_module
+
+    search = {"seed": 5, "max_evaluations": 14, "generations": 1, "progress": lambda line: None}
+    idle = optimize_module.optimize(problem, "square", 1000.0, Constraints(), **search)
+    clock = {"t": 0.0, "reads": 0}
+
+    def slow_clock() -> float:
+        clock["t"] += 30.0
+        clock["reads"] += 1
+        return clock["t"]
+
+    monkeypatch.setattr(optimize_module, "time", types.SimpleNamespace(monotonic=slow_clock))
+    busy = optimize_module.optimize(problem, "square", 1000.0, Constraints(), budget_s=1e7, **search)
+    assert clock["reads"] > 2 * busy.evaluations  # the search read the slow clock
+    assert busy.wall_s > 14 * 30.0
+    assert not idle.truncated and not busy.truncated
+    assert idle.evaluations == busy.evaluations == 14
+    np.testing.assert_array_equal(busy.x, idle.x)  # bit-equal
+    np.testing.assert_array_equal(busy.fast_ratios, idle.fast_ratios)
+    assert not np.array_equal(idle.x, _paper_start(problem))  # the search moved: the check is not vacuous
+    # a cap that the slow clock hits mid-search: stopped there, and said so
+    lines: list[str] = []
+    cut = optimize_module.optimize(problem, "square", 1000.0, Constraints(), budget_s=200.0,
+                                   **{**search, "progress": lines.append})
+    assert cut.truncated and 0 < cut.evaluations < 14
+    assert "truncated" in lines[-1] and "of 14 evaluations" in lines[-1]
+
+
+def test_same_seed_gives_the_same_design_beside_cpu_bound_processes(problem):
+    """The same, on a really busy machine: two CPU-bound processes beside the second search (one
+    BLAS thread, as `taiji2 design` runs it)."""
+    import subprocess
+    import sys
+
+    from threadpoolctl import threadpool_limits
+
+    from taiji2_estimator_pkg.design.optimize import optimize
+
+    search = {"seed": 6, "max_evaluations": 14, "generations": 1, "progress": lambda line: None}
+    with threadpool_limits(limits=1, user_api="blas"):
+        idle = optimize(problem, "square", 1000.0, Constraints(), **search)
+        hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+        try:
+            busy = optimize(problem, "square", 1000.0, Constraints(), **search)
+        finally:
+            for hog in hogs:
+                hog.kill()
+                hog.wait()
+    assert not idle.truncated and not busy.truncated and idle.evaluations == busy.evaluations == 14
+    np.testing.assert_array_equal(busy.x, idle.x)
+
+
+def test_cli_search_defaults_are_the_optimizers():
+    import argparse
+
+    from taiji2_estimator_pkg.cli import design as design_cli
+    from taiji2_estimator_pkg.design.optimize import GENERATIONS, MAX_EVALUATIONS
+
+    parser = argparse.ArgumentParser()
+    design_cli.add_arguments(parser)
+    args = parser.parse_args([])
+    assert (args.max_evaluations, args.generations) == (MAX_EVALUATIONS, GENERATIONS)
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--max-evaluations", "0"), ("--generations", "-1"),
+                                             ("--budget-s", "nan")])
+def test_bad_search_size_is_one_line(tmp_path, capsys, flag, value):
+    status = taiji2(["design", "--layout", "type1", flag, value, "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip()
+    assert status == 2 and len(err.splitlines()) == 1 and flag in err, err
 
 
 @pytest.mark.parametrize("value", ["0", "nan", "-5"])

@@ -19,6 +19,11 @@ if TYPE_CHECKING:
     import numpy as np
 
 _MAX_DURATION_S = 30 * 86400.0
+# the search's size (design.optimize.MAX_EVALUATIONS / GENERATIONS; a test keeps them equal) and its wall caps
+MAX_EVALUATIONS = 600
+GENERATIONS = 12
+BUDGET_S = 900.0
+TIME_LIMIT_S = 1200.0
 _FULL_BOUND_MAX_S = 4 * 3600.0  # longer records are verified with the (conservative) fast bound
 
 
@@ -39,10 +44,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="allowed peak attitude excursion per axis [rad] (default 0.01: the small-angle "
                              "error theta^2/2 stays 60x below the 0.3 %% G requirement)")
     parser.add_argument("--seed", type=int, default=1, help="optimiser seed (default 1)")
-    parser.add_argument("--budget-s", type=float, default=150.0, help="wall-clock budget of the search [s]")
-    parser.add_argument("--time-limit-s", type=float, default=240.0,
-                        help="wall-clock limit of the whole command [s] (default 240): the search gets "
-                             "min(--budget-s, what is left after the measured cost of the final checks)")
+    parser.add_argument("--max-evaluations", type=int, default=MAX_EVALUATIONS,
+                        help=f"evaluations of the bound in the search, global search and polish together (default "
+                             f"{MAX_EVALUATIONS}); the search is bounded by evaluations, so a seed gives the same "
+                             f"design on an idle and on a busy machine")
+    parser.add_argument("--generations", type=int, default=GENERATIONS,
+                        help=f"differential-evolution generations after the initial population (default "
+                             f"{GENERATIONS}); the global search also stops at 70 %% of --max-evaluations, the "
+                             f"polish gets the rest")
+    parser.add_argument("--budget-s", type=float, default=BUDGET_S,
+                        help=f"wall-clock cap of the search [s] (default {BUDGET_S:g}); when hit, the search stops "
+                             f"and is reported as truncated (stderr, report.md, report.json)")
+    parser.add_argument("--time-limit-s", type=float, default=TIME_LIMIT_S,
+                        help=f"wall-clock limit of the whole command [s] (default {TIME_LIMIT_S:g}): the search's "
+                             f"cap is min(--budget-s, what is left after the measured cost of the final checks)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNGs")
 
 
@@ -96,6 +111,12 @@ def main(args: argparse.Namespace) -> int:
         return _fail(f"--max-attitude-rad: must be > 0, got {args.max_attitude_rad!r}")
     if not (np.isfinite(args.time_limit_s) and args.time_limit_s > 0.0):
         return _fail(f"--time-limit-s: must be > 0, got {args.time_limit_s!r}")
+    if not (np.isfinite(args.budget_s) and args.budget_s >= 0.0):
+        return _fail(f"--budget-s: must be >= 0, got {args.budget_s!r}")
+    if args.max_evaluations < 1:
+        return _fail(f"--max-evaluations: must be >= 1, got {args.max_evaluations!r}")
+    if args.generations < 0:
+        return _fail(f"--generations: must be >= 0, got {args.generations!r}")
     started = time.monotonic()
     try:
         problem = DesignProblem(args.config or args.layout)
@@ -122,9 +143,10 @@ def main(args: argparse.Namespace) -> int:
     after_search_s = full_check_s * (1.0 + (2.0 * _FULL_BOUND_MAX_S / reference_s if args.minimize_duration else 0.0))
     budget_s = min(args.budget_s, args.time_limit_s - (time.monotonic() - started) - after_search_s - 10.0)
     if budget_s < args.budget_s:
-        _say(f"design: search budget {budget_s:.0f} s (--time-limit-s {args.time_limit_s:g} s; one full "
-             f"check takes {full_check_s:.0f} s on this machine now)")
-    result = optimize(problem, args.family, reference_s, constraints, args.seed, max(budget_s, 0.0), _say)
+        _say(f"design: search wall-clock cap {max(budget_s, 0.0):.0f} s (--time-limit-s {args.time_limit_s:g} s; "
+             f"one full check takes {full_check_s:.0f} s on this machine now)")
+    result = optimize(problem, args.family, reference_s, constraints, args.seed, max(budget_s, 0.0), _say,
+                      max_evaluations=args.max_evaluations, generations=args.generations)
     fam = family(args.family)
     _say("design: checking the design with the full bound")
     try:
@@ -171,6 +193,10 @@ def main(args: argparse.Namespace) -> int:
             final_s if args.minimize_duration else reference_s * float(np.max(ratios)) ** 2),
         "shortest_verified": bool(args.minimize_duration and verified),
         "binding_constraint": binding, "evaluations": result.evaluations,
+        "search": {"evaluations": result.evaluations, "max_evaluations": result.max_evaluations,
+                   "generations": result.generations, "max_generations": args.generations,
+                   "wall_cap_s": result.budget_s, "wall_s": result.wall_s, "truncated": result.truncated,
+                   "x": [float(v) for v in result.x]},
         "constraints": {"range_margin": constraints.range_margin, "range_m_s2": problem.range_m_s2,
                         "max_attitude_rad": constraints.max_attitude_rad, "min_thrust_n": problem.min_thrust_n,
                         "max_thrust_n": problem.max_thrust_n, "lever_arm_m": problem.lever_arm_m},
@@ -187,4 +213,8 @@ def main(args: argparse.Namespace) -> int:
           f"{at_reference['reduction']:.1%}; every requirement met at {report['shortest_duration_s'] / 3600:.2f} h "
           f"(paper {report['paper']['shortest_duration_all_met_s'] / 3600:.2f} h); binding constraint {binding}; "
           f"{maneuver_path}, {out / 'report.md'} ({report['wall_s']:.0f} s)")
+    if result.truncated:
+        _say(f"warning: taiji2 design: search truncated by the wall-clock cap ({result.budget_s:.0f} s) after "
+             f"{result.evaluations} of {result.max_evaluations} evaluations: another run with the same seed may "
+             f"give another design")
     return 0

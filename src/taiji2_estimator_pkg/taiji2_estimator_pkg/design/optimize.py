@@ -6,10 +6,16 @@ is *projected* onto the constraints: its torque scale s is raised (or lowered) u
 constraint binds (range and attitude are linear in s to O(omega^2), thrust exactly), and torque
 levels below the smallest thrust are switched off. The bound only decreases with s, so the optimum
 of each shape lies on that boundary. Over the shapes: scipy ``differential_evolution`` (seeded,
-the paper's preset in the initial population) for the first ``_GLOBAL_SHARE`` of the wall-clock
-budget, then a bounded Nelder-Mead polish of the best shape for the rest (the objective is a
-maximum of ratios, not smooth where two ratios are equal: a simplex method, not a gradient one),
-all on the fast bound; the returned design is then checked on the full simulation and full bound.
+the paper's preset in the initial population) for ``generations`` generations after its initial
+population, at most ``1 - _POLISH_SHARE`` of ``max_evaluations``, then a bounded Nelder-Mead
+polish of the best shape with the rest of ``max_evaluations`` (the objective is a maximum of
+ratios, not smooth where two ratios are equal: a simplex method, not a gradient one), all on the
+fast bound; the returned design is then checked on the full simulation and full bound.
+
+The search is bounded by evaluations, so a seed gives the same design however fast the machine
+is. ``budget_s`` is only a wall-clock cap: checked before every evaluation, and when it is hit the
+search stops where it is and the result says ``truncated`` (its design then depends on the
+machine's speed).
 """
 
 from __future__ import annotations
@@ -26,18 +32,23 @@ from scipy.optimize import differential_evolution, minimize
 from .evaluate import DesignProblem, Usage
 from .families import Family, family
 
-__all__ = ["Constraints", "DesignResult", "InfeasibleError", "check_feasible", "optimize", "project"]
+__all__ = ["GENERATIONS", "MAX_EVALUATIONS", "Constraints", "DesignResult", "InfeasibleError", "check_feasible",
+           "optimize", "project"]
 
 _REFERENCE_N_M = 1e-6
 _SHRINK = 0.995  # safety factor after the O(omega^2) non-linearity of the range check
 _SKIPPED = 1e3  # objective of a candidate not evaluated (budget spent) or infeasible
 _PROGRESS_EVERY_S = 15.0
-_GLOBAL_SHARE = 0.7  # share of the budget for the global search; the rest polishes its best shape
+_POLISH_SHARE = 0.3  # share of max_evaluations kept for the polish of the global search's best shape
+# defaults: the search an idle 2-core machine made in the former 150-s wall-clock budget (type1 square,
+# measured: 596 evaluations, 412 of them global = the initial 32 + 12 generations of 32, the rest polish)
+MAX_EVALUATIONS = 600
+GENERATIONS = 12  # differential-evolution generations after the initial population
 _SIMPLEX_STEP = 0.05  # initial simplex of the polish: this fraction of each parameter's range
 
 
 class _BudgetSpent(Exception):
-    """The polish ran out of budget (its best evaluation so far is kept)."""
+    """The polish ran out of evaluations or hit the wall-clock cap (its best evaluation so far is kept)."""
 
 
 @dataclass(frozen=True)
@@ -65,6 +76,10 @@ class DesignResult:
     fast_ratios: np.ndarray
     evaluations: int
     wall_s: float
+    generations: int = 0  # differential-evolution generations completed after the initial population
+    max_evaluations: int = MAX_EVALUATIONS
+    truncated: bool = False  # the wall-clock cap stopped the search before its evaluations were spent
+    budget_s: float = float("inf")
 
 
 def _limits(problem: DesignProblem, usage: Usage, constraints: Constraints) -> dict[str, float]:
@@ -121,27 +136,38 @@ def check_feasible(problem: DesignProblem, duration_s: float, constraints: Const
 
 
 def optimize(problem: DesignProblem, family_name: str, duration_s: float, constraints: Constraints,
-             seed: int = 1, budget_s: float = 150.0, progress: Callable[[str], None] | None = None) -> DesignResult:
-    """Search one family (see module doc); progress lines go to ``progress`` (default stderr)."""
+             seed: int = 1, budget_s: float = float("inf"), progress: Callable[[str], None] | None = None,
+             max_evaluations: int = MAX_EVALUATIONS, generations: int = GENERATIONS) -> DesignResult:
+    """Search one family (see module doc); progress lines go to ``progress`` (default stderr).
+
+    Deterministic for a seed: ``max_evaluations`` evaluations of the fast bound at most (the
+    paper's preset first), ``generations`` generations of the global search; ``budget_s`` is a
+    wall-clock cap whose hit is reported (``truncated``), on ``progress`` too.
+    """
+    if max_evaluations < 1 or generations < 0:
+        raise ValueError(f"max_evaluations must be >= 1 and generations >= 0, got {max_evaluations}, {generations}")
     say = progress or (lambda line: print(line, file=sys.stderr, flush=True))
     fam = family(family_name)
     paper = problem.config.maneuver
     x0 = np.clip(fam.paper_start(paper.period_s, paper.amplitude_n_m, paper.phase_s),
                  [b[0] for b in fam.bounds], [b[1] for b in fam.bounds])
     started = time.monotonic()
-    state = {"n": 0, "best": np.inf, "x": x0, "said": started, "phase_end": started + _GLOBAL_SHARE * budget_s,
-             "polish": False}
+    global_cap = max(1, max_evaluations - int(np.ceil(_POLISH_SHARE * max_evaluations)))
+    state = {"n": 0, "best": np.inf, "x": x0, "said": started, "cap": global_cap, "polish": False,
+             "generations": 0, "truncated": False, "skipped": False}
 
     def objective(x: np.ndarray) -> float:
-        now = time.monotonic()
-        if now > state["phase_end"]:
+        stop = state["n"] >= state["cap"]
+        if not stop and time.monotonic() - started >= budget_s:
+            state["truncated"] = stop = True
+        if stop:
             if state["polish"]:
                 raise _BudgetSpent
-            # scipy checks the callback once per generation (up to 2 x popsize x dim evaluations of
-            # ~1 s): past the budget the rest of the generation is skipped, not evaluated
+            # scipy checks the callback once per generation: the rest of the generation is skipped
+            state["skipped"] = True
             return _SKIPPED
-        if now - state["said"] > _PROGRESS_EVERY_S:
-            callback()
+        if time.monotonic() - state["said"] > _PROGRESS_EVERY_S:
+            report_progress()
         state["n"] += 1
         try:
             maneuver, _, _ = project(problem, fam, x, duration_s, constraints)
@@ -152,30 +178,44 @@ def optimize(problem: DesignProblem, family_name: str, duration_s: float, constr
             state["best"], state["x"] = worst, np.array(x)
         return worst
 
-    def callback(*_: Any, **__: Any) -> bool:
+    def report_progress() -> None:
         state["said"] = time.monotonic()
-        elapsed = state["said"] - started
         say(f"  design {family_name}{' (polish)' if state['polish'] else ''}: {state['n']} evaluations, "
-            f"best max CRLB/requirement {state['best']:.3f} ({elapsed:.0f} s)")
-        return state["said"] > state["phase_end"]
+            f"best max CRLB/requirement {state['best']:.3f} ({state['said'] - started:.0f} s)")
 
-    say(f"design {family_name}: {len(fam.bounds)} parameters, budget {budget_s:.0f} s, seed {seed}")
+    def generation_done(*_: Any, **__: Any) -> bool:
+        state["generations"] += not state["skipped"]  # generations evaluated in full
+        report_progress()
+        return state["truncated"] or state["n"] >= state["cap"]
+
+    say(f"design {family_name}: {len(fam.bounds)} parameters, seed {seed}, at most {max_evaluations} evaluations "
+        f"({generations} generation{'s' if generations != 1 else ''} of the global search, then a polish); "
+        f"wall-clock cap {budget_s:.0f} s")
     objective(x0)
-    callback()
-    differential_evolution(objective, fam.bounds, x0=x0, seed=seed, popsize=max(2, 24 // len(fam.bounds)),
-                           maxiter=10_000, polish=False, init="sobol", tol=0.0, callback=callback,
-                           mutation=(0.5, 1.0), recombination=0.7)
-    _polish(objective, fam, state, started + budget_s)
+    report_progress()
+    if not state["truncated"] and state["n"] < state["cap"]:
+        differential_evolution(objective, fam.bounds, x0=x0, seed=seed, popsize=max(2, 24 // len(fam.bounds)),
+                               maxiter=generations, polish=False, init="sobol", tol=0.0,
+                               callback=generation_done, mutation=(0.5, 1.0), recombination=0.7)
+    state["cap"] = max_evaluations
+    _polish(objective, fam, state)
+    report_progress()
+    if state["truncated"]:
+        say(f"design {family_name}: search truncated: the wall-clock cap of {budget_s:.0f} s was hit after "
+            f"{state['n']} of {max_evaluations} evaluations; this design depends on the machine's speed "
+            f"(raise the cap or lower --max-evaluations for a reproducible search)")
     x = state["x"]
     maneuver, scale, binding = project(problem, fam, x, duration_s, constraints)
     ratios = problem.ratios(maneuver, duration_s, fam.period_s(x), fast=True)
     return DesignResult(family_name, x, maneuver, fam.period_s(x), scale, binding, ratios, state["n"],
-                        time.monotonic() - started)
+                        time.monotonic() - started, state["generations"], max_evaluations, state["truncated"],
+                        float(budget_s))
 
 
-def _polish(objective: Callable[[np.ndarray], float], fam: Family, state: dict[str, Any], end: float) -> None:
-    """Bounded Nelder-Mead from the best shape until ``end`` (monotonic s); ``state`` keeps the best."""
-    if time.monotonic() >= end or not np.isfinite(state["best"]):
+def _polish(objective: Callable[[np.ndarray], float], fam: Family, state: dict[str, Any]) -> None:
+    """Bounded Nelder-Mead from the best shape until ``state["cap"]`` evaluations in all (or the
+    wall-clock cap); ``state`` keeps the best."""
+    if state["truncated"] or state["n"] >= state["cap"] or not np.isfinite(state["best"]):
         return
     lower, upper = np.array([b[0] for b in fam.bounds]), np.array([b[1] for b in fam.bounds])
     start = np.array(state["x"], dtype=np.float64)
@@ -184,7 +224,7 @@ def _polish(objective: Callable[[np.ndarray], float], fam: Family, state: dict[s
     simplex = np.tile(start, (start.size + 1, 1))
     for i in range(start.size):
         simplex[i + 1, i] += steps[i] if start[i] + steps[i] <= upper[i] else -steps[i]
-    state["polish"], state["phase_end"] = True, end
+    state["polish"] = True
     try:
         minimize(objective, start, method="Nelder-Mead", bounds=list(fam.bounds),
                  options={"initial_simplex": simplex, "xatol": 1e-6, "fatol": 1e-6, "maxfev": 100_000})

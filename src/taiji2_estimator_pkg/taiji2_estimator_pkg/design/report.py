@@ -87,6 +87,20 @@ def _plots(out: Path, report: dict) -> list[str]:
     return files
 
 
+def _search_line(report: dict) -> str:
+    search = report.get("search")
+    if not search:
+        return ""
+    size = (f"{search['evaluations']} of at most {search['max_evaluations']} evaluations, "
+            f"{search['generations']} of {search['max_generations']} generations of the global search, then the polish")
+    if search["truncated"]:
+        return (f"Search: **truncated** by the wall-clock cap of {search['wall_cap_s']:.0f} s after {size}: "
+                f"this design depends on the machine's speed; another run with seed {report['seed']} may differ "
+                f"(raise --budget-s / --time-limit-s or lower --max-evaluations).")
+    return (f"Search: complete, {size} ({search['wall_s']:.0f} s): bounded by evaluations, the same design for "
+            f"seed {report['seed']} on any machine load.")
+
+
 def write_report(out: Path, report: dict, plots: bool = True) -> None:
     """Write report.json, report.md and the PNGs into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
@@ -102,7 +116,7 @@ def write_report(out: Path, report: dict, plots: bool = True) -> None:
              f" uN at lever arm {report['constraints']['lever_arm_m']:g} m, attitude <= "
              f"{report['constraints']['max_attitude_rad']:g} rad. Binding constraint of the design: "
              f"**{report['binding_constraint']}**. Seed {report['seed']}, {report['evaluations']} evaluations, "
-             f"{report['wall_s']:.0f} s.", "",
+             f"{report['wall_s']:.0f} s.", "", _search_line(report), "",
              f"Maneuver file: `{report['maneuver_file']}` (maneuver_commander `maneuver_file`).", "",
              "| parameter | paper CRLB/req | design CRLB/req | paper: T met [h] | design: T met [h] |",
              "|---|---|---|---|---|"]
