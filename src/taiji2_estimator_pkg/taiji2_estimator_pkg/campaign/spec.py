@@ -27,14 +27,19 @@ SPEC_KEYS = {
     "overrides": "dotted-key config overrides applied to every case (mapping)",
     "grid": "dotted key -> list of values; the cases span their cartesian product (mapping)",
     "effect_sets": "list of effect sets; each a list of {name: <catalog effect>, <params>} ([] = none)",
+    "fidelities": "simulators of the data, subset of [standard, reference] (list, default [standard]); "
+                  "reference: independently discretised, its own timing conventions and noise streams",
+    "model_overrides": "dotted-key overrides of the estimators' instrument model only (mapping, default {}): "
+                       "data made with one noise budget, estimated with another",
     "crlb": "compute the Cramer-Rao bound per case (bool, default true)",
     "diagnose": "run the sim-to-real diagnosis per case (bool, default false)",
     "chunk_size": "completed cases per Parquet file (int, default 25)",
     "cases": "explicit list of cases instead of / besides the grid: mappings with keys layout, "
              "maneuver, duration_s, seed, overrides, effects",
 }
-CASE_KEYS = ("layout", "maneuver", "duration_s", "seed", "overrides", "effects")
+CASE_KEYS = ("layout", "maneuver", "duration_s", "seed", "overrides", "effects", "fidelity", "model_overrides")
 METHODS = ("gls", "paper")
+FIDELITIES = ("standard", "reference")
 
 
 class SpecError(ValueError):
@@ -77,6 +82,8 @@ def load_spec(source: str | os.PathLike[str] | Mapping[str, Any]) -> dict[str, A
         "overrides": _mapping(raw, "overrides"),
         "grid": _grid(raw.get("grid", {})),
         "effect_sets": _effect_sets(raw.get("effect_sets", [[]])),
+        "fidelities": _fidelities(raw.get("fidelities", ["standard"])),
+        "model_overrides": _mapping(raw, "model_overrides"),
         "crlb": _bool(raw, "crlb", True),
         "diagnose": _bool(raw, "diagnose", False),
         "chunk_size": int(_positive("chunk_size", raw.get("chunk_size", 25))),
@@ -93,17 +100,20 @@ def expand_cases(spec: Mapping[str, Any]) -> list[dict[str, Any]]:
     cases: list[dict[str, Any]] = []
     grid_keys = list(spec["grid"])
     grid_values = [spec["grid"][k] for k in grid_keys]
-    for layout, maneuver, duration_s, combo, effects, seed in itertools.product(
+    for layout, maneuver, duration_s, combo, effects, fidelity, seed in itertools.product(
             spec["layouts"], spec["maneuvers"], spec["durations_s"], itertools.product(*grid_values),
-            spec["effect_sets"], spec["seeds"]):
+            spec["effect_sets"], spec.get("fidelities", ["standard"]), spec["seeds"]):
         overrides = {**spec["overrides"], **dict(zip(grid_keys, combo, strict=True))}
         cases.append({"layout": layout, "maneuver": maneuver, "duration_s": float(duration_s), "seed": int(seed),
-                      "overrides": overrides, "effects": list(effects)})
+                      "overrides": overrides, "effects": list(effects), "fidelity": fidelity,
+                      "model_overrides": dict(spec.get("model_overrides", {}))})
     for case in spec["cases"]:
         cases.append({"layout": case.get("layout", "type1"), "maneuver": case.get("maneuver"),
                       "duration_s": float(case.get("duration_s", 10800.0)), "seed": int(case.get("seed", 1)),
                       "overrides": {**spec["overrides"], **dict(case.get("overrides", {}))},
-                      "effects": list(case.get("effects", []))})
+                      "effects": list(case.get("effects", [])),
+                      "fidelity": _fidelities([case.get("fidelity", "standard")])[0],
+                      "model_overrides": {**spec.get("model_overrides", {}), **dict(case.get("model_overrides", {}))}})
     for case in cases:
         case["methods"] = list(spec["methods"])
         case["crlb"] = bool(spec["crlb"])
@@ -120,12 +130,20 @@ def group_label(case: Mapping[str, Any]) -> str:
         parts.append(f"maneuver={case['maneuver']}")
     parts += [f"{k}={json.dumps(v)}" for k, v in sorted(case["overrides"].items())]
     parts += [json.dumps(e, sort_keys=True) for e in case["effects"]]
+    if case.get("fidelity", "standard") != "standard":
+        parts.append(f"fidelity={case['fidelity']}")
+    parts += [f"model.{k}={json.dumps(v)}" for k, v in sorted(case.get("model_overrides", {}).items())]
     return " ".join(parts)
 
 
 def case_hash(case: Mapping[str, Any]) -> str:
     """Content hash of a case (inputs only; a layout file contributes its text)."""
     body = {k: case.get(k) for k in (*CASE_KEYS, "methods", "crlb", "diagnose")}
+    # defaults leave the hash of the cases from before these keys existed unchanged
+    if body.get("fidelity", "standard") == "standard":
+        body.pop("fidelity")
+    if not body.get("model_overrides"):
+        body.pop("model_overrides")
     layout = Path(str(case["layout"]))
     if layout.suffix in (".yaml", ".yml") and layout.is_file():
         body["layout_text"] = layout.read_text(encoding="utf-8")
@@ -182,6 +200,12 @@ def _seeds(value: Any) -> list[int]:
 def _methods(value: Any) -> list[str]:
     if not isinstance(value, list) or not value or any(m not in METHODS for m in value):
         raise SpecError("methods", f"expected a non-empty subset of {list(METHODS)}, got {value!r}")
+    return list(dict.fromkeys(value))
+
+
+def _fidelities(value: Any) -> list[str]:
+    if not isinstance(value, list) or not value or any(f not in FIDELITIES for f in value):
+        raise SpecError("fidelities", f"expected a non-empty subset of {list(FIDELITIES)}, got {value!r}")
     return list(dict.fromkeys(value))
 
 

@@ -28,6 +28,8 @@ ROW_SCHEMA = pa.schema([
     ("sigma", pa.float64()), ("truth", pa.float64()), ("error", pa.float64()), ("crlb", pa.float64()),
     ("nis_mean", pa.float64()), ("diagnosis", pa.string()), ("compute_s", pa.float64()),
     ("status", pa.string()), ("error_message", pa.string()),
+    ("fidelity", pa.string()), ("model_overrides", pa.string()), ("nis_band", pa.float64()),
+    ("noise_adjusted", pa.bool_()),
 ])
 LIBRARIES = ("numpy", "scipy", "dask", "distributed", "pyarrow", "taiji2_sim_pkg", "taiji2_estimator_pkg")
 

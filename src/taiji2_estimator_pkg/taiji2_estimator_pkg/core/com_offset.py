@@ -48,6 +48,7 @@ from .factored_steady import RegressorFactors
 from .instrument import LINEAR_FROM_ANGULAR, InstrumentModel, angular_differences, linear_scale_factors, linear_sums
 from .joint_com_offset import solve_joint
 from .kalman import KalmanFilter, chi2_gate
+from .noise_level import BandNoise, band_noise, r_adjustment
 from .scale_factor import ScaleFactorEstimate, ScaleFactorModel, _EpochArrays
 from .twostage import StateSpaceModel, TwoStageFilter, solve_information
 from .validation import InputValidator, ValidationOptions, validate_batch
@@ -118,6 +119,12 @@ class ComOffsetEstimate(PerGrsBlocks):
         (3 n_grs, 3 n_grs) Cov(d, G joint) [m rad s^-2 V^-1].
     scale_factor_covariance_joint : numpy.ndarray or None
         (3 n_grs, 3 n_grs) Cov(G joint).
+    nis_band : float
+        NIS per dof of the linear channels in the band that carries d, before any adjustment
+        (:mod:`.noise_level`; bulk path; NaN where not measured). 1 if the noise model holds there.
+    noise_adjusted : bool
+        Whether R was changed to the measured band noise (then the estimate and its covariance
+        follow the data's noise level, not the budget's).
     """
 
     grs_ids: tuple[int, ...]
@@ -134,6 +141,8 @@ class ComOffsetEstimate(PerGrsBlocks):
     scale_factors_joint: np.ndarray | None = None
     scale_factor_cross_covariance: np.ndarray | None = None
     scale_factor_covariance_joint: np.ndarray | None = None
+    nis_band: float = float("nan")
+    noise_adjusted: bool = False
 
 
     def difference(self) -> tuple[np.ndarray, np.ndarray]:
@@ -150,7 +159,8 @@ class ComOffsetEstimate(PerGrsBlocks):
                "covariance_given_scale_factors": self.covariance_given_scale_factors.tolist(),
                "scale_factor_jacobian": self.scale_factor_jacobian.tolist(), "determined": self.determined,
                "t_s": self.t_s, "n_samples": self.n_samples, "nis_mean": self.nis_mean,
-               "rejected": self.rejected, "method": self.method}
+               "rejected": self.rejected, "method": self.method, "nis_band": self.nis_band,
+               "noise_adjusted": self.noise_adjusted}
         for key in ("scale_factors_joint", "scale_factor_cross_covariance", "scale_factor_covariance_joint"):
             value = getattr(self, key)
             if value is not None:
@@ -183,6 +193,10 @@ class ComOffsetOptions:
     determination_margin : float
         Publish once the information on d exceeds this multiple of the statistical fluctuation of
         the errors-in-variables correction.
+    adapt_noise : bool
+        Bulk path: measure the noise of the linear channels in the band that carries d from the
+        post-fit innovations and, where it departs from the model beyond its scatter, estimate
+        again with R changed accordingly (:mod:`.noise_level`).
     validation : ValidationOptions
         Input checks.
     """
@@ -193,6 +207,7 @@ class ComOffsetOptions:
     gate_probability: float | None = 1e-6
     snap_tolerance: float = 1e-10
     determination_margin: float = 20.0
+    adapt_noise: bool = True
     validation: ValidationOptions = field(default_factory=ValidationOptions)
 
     def __post_init__(self) -> None:
@@ -248,7 +263,8 @@ class ComOffsetModel:
         Nuisance model.
     """
 
-    def __init__(self, instrument: InstrumentModel, grs_ids: Sequence[int], options: ComOffsetOptions) -> None:
+    def __init__(self, instrument: InstrumentModel, grs_ids: Sequence[int], options: ComOffsetOptions,
+                 r_adjustment: np.ndarray | None = None) -> None:
         self.instrument = instrument
         self.grs_ids = tuple(int(g) for g in grs_ids)
         self.options = options
@@ -268,6 +284,9 @@ class ComOffsetModel:
                 if a == b:
                     block = block + instrument.linear_noise_crf(self.grs_ids[a])
                 r[3 * a:3 * a + 3, 3 * b:3 * b + 3] = block
+        # r_adjustment: the change of R measured in the band that carries d (noise_level.py)
+        self.r_adjustment = np.zeros((self.m, self.m)) if r_adjustment is None else np.asarray(r_adjustment)
+        r = r + self.r_adjustment
         self.r = 0.5 * (r + r.T)
         # an epoch with only GRS i: omega_dot from GRS i alone (errors-in-variables noise Q_i)
         self.q_single = {g: instrument.angular_noise_crf(g) for g in self.grs_ids}
@@ -275,7 +294,8 @@ class ComOffsetModel:
         for a, g in enumerate(self.grs_ids):
             r_g = self.r.copy()
             e_block = cross_matrix(d_nom[a]) @ self.q_single[g] @ cross_matrix(d_nom[a]).T
-            r_g[3 * a:3 * a + 3, 3 * a:3 * a + 3] = thruster + instrument.linear_noise_crf(g) + e_block
+            r_g[3 * a:3 * a + 3, 3 * a:3 * a + 3] = (thruster + instrument.linear_noise_crf(g) + e_block
+                                                     + self.r_adjustment[3 * a:3 * a + 3, 3 * a:3 * a + 3])
             self.r_single[g] = 0.5 * (r_g + r_g.T)
         h = np.vstack([np.eye(3)] * n_grs)
         srp = noise.srp_process()
@@ -604,6 +624,7 @@ class ComOffsetEstimator:
         self.eiv_full = self.model.eiv_correction(self.filter.lambda_inv_ss)
         self.eiv_sum = np.zeros((self.model.n_columns, self.model.n_columns))
         self.n_eiv = 0
+        self.band_noise: BandNoise | None = None
         self.t0_s: float | None = None
         self.t_last_s = float("nan")
         self.last_index: int | None = None
@@ -711,7 +732,9 @@ class ComOffsetEstimator:
         return ComOffsetEstimate(self.grs_ids, beta[:n_d].copy(), 0.5 * (cov_total + cov_total.T), cov_noise,
                                  jac, True, self.t_last_s, self.filter.n_updates, chi2 / dof, rejected,
                                  scale_factors_joint=g_joint, scale_factor_cross_covariance=cov_gd,
-                                 scale_factor_covariance_joint=cov_gg)
+                                 scale_factor_covariance_joint=cov_gg,
+                                 nis_band=float("nan") if self.band_noise is None else self.band_noise.nis,
+                                 noise_adjusted=bool(np.any(self.model.r_adjustment)))
 
     def _scale_factors(self, scale_factors: ScaleFactorEstimate | tuple[ArrayLike, ArrayLike]
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -876,30 +899,52 @@ class ComOffsetEstimator:
         tau = (epochs.t - self.t0_s) / self.options.trend_time_scale_s
         g, _ = self._scale_factors(scale_factors)
         initial = copy.deepcopy(self.filter)
+        whitened = self._accumulate(initial, epochs, omega, tau, g)
+        self.band_noise = None if whitened is None else band_noise(whitened)
+        if self.options.adapt_noise and self.band_noise is not None and self.band_noise.significant:
+            # the noise in the band that carries d differs from the model: estimate again with R
+            # changed to whiten that band (noise_level.py), so weights and covariance follow the data
+            adjustment = r_adjustment(initial.lambda_ss, self.band_noise.covariance)
+            self.model = ComOffsetModel(self.instrument, self.grs_ids, self.options, adjustment)
+            initial = TwoStageFilter(self.model.state_space, self.model.n_columns, self.options.snap_tolerance)
+            self.eiv_full = self.model.eiv_correction(initial.lambda_inv_ss)
+            self._accumulate(initial, epochs, omega, tau, g, evaluate_last=False)
+        self.last_index = int(epochs.index[-1])
+        self.t_last_s = float(epochs.t[-1])
+        return self.estimate(scale_factors)
+
+    def _accumulate(self, initial: TwoStageFilter, epochs: _EpochArrays, omega: np.ndarray, tau: np.ndarray,
+                    g: np.ndarray, evaluate_last: bool = True) -> np.ndarray | None:
+        """Accumulate the record from ``initial`` with the chi-square gate (a second pass without the
+        flagged epochs); returns the whitened post-fit innovations of the accepted solution (NaN
+        where not a regular epoch), or None when not evaluated."""
         gated = np.zeros(epochs.count, dtype=bool)
+        whitened = None
         for attempt in range(2):
             self.filter = copy.deepcopy(initial)
-            self.eiv_sum = np.zeros_like(self.eiv_sum)
+            self.eiv_sum = np.zeros_like(self.eiv_full)
             self.n_eiv = 0
             self.determined = False
             self._drive(epochs, omega, tau, gated)
-            if self.gate is None or attempt == 1 or not np.all(np.isfinite(g)):
+            whitened = None
+            if not np.all(np.isfinite(g)) or (attempt == 1 and not evaluate_last):
                 break
             beta, _, ok = self.solve(g)
-            if not ok:
+            if not ok or (self.gate is None and not evaluate_last):
                 break
-            nis = self._evaluate(initial, epochs, omega, tau, gated, g, beta)
+            nis, whitened = self._evaluate(initial, epochs, omega, tau, gated, g, beta)
+            if self.gate is None or attempt == 1:
+                break
             new = (nis > self.gate) & ~gated
             if not np.any(new):
                 break
             gated |= new
         self.filter.n_rejected = int(np.count_nonzero(gated))
-        self.last_index = int(epochs.index[-1])
-        self.t_last_s = float(epochs.t[-1])
-        return self.estimate(scale_factors)
+        return whitened
 
     def _drive(self, epochs: _EpochArrays, omega: np.ndarray, tau: np.ndarray, gated: np.ndarray,
-               evaluate: tuple[np.ndarray, np.ndarray] | None = None, nis: np.ndarray | None = None) -> None:
+               evaluate: tuple[np.ndarray, np.ndarray] | None = None, nis: np.ndarray | None = None,
+               innovations: np.ndarray | None = None) -> None:
         """Run the filter over the epochs: accumulate, or (``evaluate = (g, beta)``) record post-fit NIS."""
         model = self.model
         theta = None if evaluate is None else evaluate
@@ -934,8 +979,10 @@ class ComOffsetEstimator:
                     else:
                         y_eval = model.residual(epochs.sums[start:end], epochs.diffs[start:end], omega[start:end],
                                                 tau[start:end], evaluate[0], evaluate[1])
-                        out = self.filter.run_regular(y_eval)
+                        out = self.filter.run_regular(y_eval, want_innovations=innovations is not None)
                         nis[start:end] = out.nis  # type: ignore[index]
+                        if innovations is not None and out.innovations is not None:
+                            innovations[start:end] = out.innovations
                     start = end
                 k = stop
                 continue
@@ -958,13 +1005,16 @@ class ComOffsetEstimator:
             k += 1
 
     def _evaluate(self, initial: TwoStageFilter, epochs: _EpochArrays, omega: np.ndarray, tau: np.ndarray,
-                  gated: np.ndarray, g: np.ndarray, beta: np.ndarray) -> np.ndarray:
+                  gated: np.ndarray, g: np.ndarray, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(post-fit NIS (L,), whitened post-fit innovations (L, m), NaN rows where not regular)."""
         saved = self.filter
         self.filter = initial.evaluation_copy(self._engine_theta(g, beta))
         nis = np.zeros(epochs.count)
-        self._drive(epochs, omega, tau, gated, (g, beta), nis)
+        innovations = np.full((epochs.count, self.model.m), np.nan)
+        self._drive(epochs, omega, tau, gated, (g, beta), nis, innovations)
         self.filter = saved
-        return nis
+        whiten = np.linalg.cholesky(initial.lambda_inv_ss)  # Lambda^-1 = L L^T: nu = L^T e
+        return nis, innovations @ whiten
 
     # checkpoint ---------------------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
