@@ -239,8 +239,9 @@ def crlb(instrument: InstrumentModel, t_s: ArrayLike, omega_dot: ArrayLike, omeg
     cov_g = cov_all[:p, :p]
     g_true = np.concatenate([np.asarray(scale_factors[g], dtype=np.float64) for g in grs_ids])
     d_true = np.concatenate([np.asarray(com_offsets[g], dtype=np.float64) for g in grs_ids])
+    # the noise budget as given: no measured band noise on noise-free signals
     co = ComOffsetEstimator(instrument, grs_ids, ComOffsetOptions(detrend=detrend, gate_probability=None,
-                                                                  validation=no_checks))
+                                                                  adapt_noise=False, validation=no_checks))
     co.process_batch(t, volts, w, (g_true, np.zeros((p, p))))
     co.eiv_sum[:] = 0.0  # Fisher information of the true regressors
     beta_info, _, _, _ = co._beta_system(g_true)
