@@ -64,6 +64,9 @@ __all__ = [
     "cross_matrix",
 ]
 
+#: at most this many re-estimations with the measured band noise (noise_level.py)
+_NOISE_ITERATIONS = 4
+
 # linear axis read through each angular scale factor: G_Pphi -> y, G_Ptheta -> z, G_Ppsi -> x
 _LINEAR_AXIS_OF_ANGULAR = {j: LINEAR_FROM_ANGULAR.index(j) for j in range(3)}
 
@@ -557,6 +560,11 @@ class ComOffsetModel:
 # ==============================================================================================
 
 
+def whitening(engine: TwoStageFilter) -> np.ndarray:
+    """``W = L^T`` with ``Lambda^-1 = L L^T`` (steady state): ``nu = W e`` has unit covariance."""
+    return np.linalg.cholesky(engine.lambda_inv_ss).T
+
+
 @dataclass(frozen=True)
 class ComOffsetStepReport:
     """What one per-sample update did.
@@ -901,14 +909,20 @@ class ComOffsetEstimator:
         initial = copy.deepcopy(self.filter)
         whitened = self._accumulate(initial, epochs, omega, tau, g)
         self.band_noise = None if whitened is None else band_noise(whitened)
-        if self.options.adapt_noise and self.band_noise is not None and self.band_noise.significant:
+        current = self.band_noise
+        for _ in range(_NOISE_ITERATIONS if self.options.adapt_noise else 0):
+            if current is None or not current.significant:
+                break
             # the noise in the band that carries d differs from the model: estimate again with R
-            # changed to whiten that band (noise_level.py), so weights and covariance follow the data
-            adjustment = r_adjustment(initial.lambda_ss, self.band_noise.covariance)
+            # changed to whiten that band (noise_level.py), so weights and covariance follow the data.
+            # Repeated: a filter with too small an R lets its SRP state take up part of the excess, so
+            # one measurement sees only part of it (2-3 passes for a force noise at 2x PSD).
+            adjustment = self.model.r_adjustment + r_adjustment(whitening(initial), current.covariance)
             self.model = ComOffsetModel(self.instrument, self.grs_ids, self.options, adjustment)
             initial = TwoStageFilter(self.model.state_space, self.model.n_columns, self.options.snap_tolerance)
             self.eiv_full = self.model.eiv_correction(initial.lambda_inv_ss)
-            self._accumulate(initial, epochs, omega, tau, g, evaluate_last=False)
+            whitened = self._accumulate(initial, epochs, omega, tau, g)
+            current = None if whitened is None else band_noise(whitened)
         self.last_index = int(epochs.index[-1])
         self.t_last_s = float(epochs.t[-1])
         return self.estimate(scale_factors)
@@ -1013,8 +1027,7 @@ class ComOffsetEstimator:
         innovations = np.full((epochs.count, self.model.m), np.nan)
         self._drive(epochs, omega, tau, gated, (g, beta), nis, innovations)
         self.filter = saved
-        whiten = np.linalg.cholesky(initial.lambda_inv_ss)  # Lambda^-1 = L L^T: nu = L^T e
-        return nis, innovations @ whiten
+        return nis, innovations @ whitening(initial).T
 
     # checkpoint ---------------------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:

@@ -17,10 +17,12 @@ covariance when the model is right). Means over blocks of B samples keep the ban
 A ``C_band`` outside the scatter means the noise in that band differs from the model. The model's
 R is then changed so that the whitened band covariance becomes I::
 
-    R' = R + Lambda^{1/2} (C_band - I) Lambda^{1/2}
+    R' = R + W^-1 (C_band - I) W^-T          (nu = W e, W = L^T)
 
-(symmetric square root; the SRP state part of Lambda is left as it is), and d is estimated again
-with R' (weights and covariance follow the data). The band NIS ``tr(C_band) / m`` is reported.
+(the SRP state part of Lambda is left as it is), and d is estimated again with R' (weights and
+covariance follow the data). A filter whose R is too small lets its slow SRP state take up part of
+the excess, so one measurement sees only part of it: the estimator repeats the step until the band
+is white within its scatter (2-3 passes for a force noise at 2x PSD). The band NIS ``tr(C_band) / m`` is reported.
 """
 
 from __future__ import annotations
@@ -97,14 +99,15 @@ def band_noise(whitened: np.ndarray, block_samples: int = BLOCK_SAMPLES) -> Band
                      departure > max(scatter, MIN_DEPARTURE))
 
 
-def r_adjustment(lambda_ss: np.ndarray, covariance: np.ndarray) -> np.ndarray:
-    """``Lambda^{1/2} (C_band - I) Lambda^{1/2}``, the change of R that whitens the band (m, m).
+def r_adjustment(whitening: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    """``W^-1 (C_band - I) W^-T``: the change of R that whitens the band (m, m).
 
-    The new R is kept positive definite: eigenvalues of ``C_band`` are floored at 0.1.
+    ``W`` is the whitening the innovations were taken with (``nu = W e``, ``W Lambda W^T = I``), so
+    the band covariance of e is ``W^-1 C_band W^-T``. ``C_band``'s eigenvalues are floored at 0.1 to
+    keep R positive definite.
     """
-    values, vectors = np.linalg.eigh(0.5 * (lambda_ss + lambda_ss.T))
-    root = (vectors * np.sqrt(np.maximum(values, 0.0))) @ vectors.T
-    c_values, c_vectors = np.linalg.eigh(covariance)
+    c_values, c_vectors = np.linalg.eigh(0.5 * (covariance + covariance.T))
     c_floor = (c_vectors * np.maximum(c_values, 0.1)) @ c_vectors.T
-    out = root @ (c_floor - np.eye(covariance.shape[0])) @ root
+    inverse = np.linalg.inv(whitening)
+    out = inverse @ (c_floor - np.eye(covariance.shape[0])) @ inverse.T
     return 0.5 * (out + out.T)
