@@ -10,9 +10,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimate
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.pipeline import calibrate as pipeline_calibrate
 from taiji2_estimator_pkg.report import EstimateTable, GrsResult
@@ -170,4 +172,16 @@ def calibrate(record: AlignedRecord, instrument: InstrumentModel, method: str = 
                          extra={"rejected": rejected, "missing": {k: v for k, v in record.missing.items() if v},
                                 "samples": {"epochs": int(record.t_s.size), "scale_factor_updates": int(g.n_samples),
                                             "com_offset_updates": int(d.n_samples)},
-                                "determined": bool(g.determined and d.determined)})
+                                "determined": bool(g.determined and d.determined),
+                                **_com_offset_extra(d)})
+
+
+def _com_offset_extra(d: ComOffsetEstimate) -> dict[str, Any]:
+    """The c.m.-offset stage's noise check and, for the joint estimator, G re-estimated with d."""
+    out: dict[str, Any] = {"com_offset_noise": {"nis_mean": float(d.nis_mean), "nis_band": float(d.nis_band),
+                                                "noise_adjusted": bool(d.noise_adjusted)}}
+    if d.scale_factors_joint is not None:
+        out["joint"] = {"scale_factors": d.scale_factors_joint.tolist(),
+                        "scale_factors_cov": d.scale_factor_covariance_joint.tolist(),
+                        "com_offset_scale_factors_cov": d.scale_factor_cross_covariance.tolist()}
+    return out

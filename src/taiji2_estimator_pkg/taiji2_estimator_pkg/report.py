@@ -136,4 +136,10 @@ def format_table(table: EstimateTable) -> str:
     for r in table.grs:
         lines.append(f"  GRS{r.grs_id}: {r.samples_used} samples used, {r.samples_rejected} rejected, "
                      f"mean NIS {r.nis_mean:.2f}")
+    noise = table.extra.get("com_offset_noise")
+    if noise and noise.get("nis_band") == noise.get("nis_band"):  # measured (not NaN)
+        verdict = ("R adjusted to the measured noise: d and its sigma follow the data, not the budget"
+                   if noise["noise_adjusted"] else "consistent with the noise budget")
+        lines.append(f"  c.m. offsets: linear-channel noise in the band of d {noise['nis_band']:.2f} x the model "
+                     f"({verdict})")
     return "\n".join(lines)
