@@ -1,0 +1,531 @@
+"""The default (``gls``) c.m.-offset estimator: per-sample (node) and bulk (offline) forms.
+
+The two-stage filter (:mod:`.twostage`) accumulates the whitened basis columns of
+:class:`~.com_offset_model.ComOffsetModel`; the estimate for any G follows from that cross-product
+(two-stage ``d(G)``, or jointly with G by :mod:`.joint_com_offset`, the default); the bulk path
+measures the noise in the band that carries d (:mod:`.noise_level`).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .com_offset_estimate import ComOffsetEstimate
+from .com_offset_model import ComOffsetModel, ComOffsetOptions
+from .instrument import InstrumentModel, angular_differences, linear_sums
+from .joint_com_offset import solve_joint
+from .kalman import chi2_gate
+from .noise_level import BandNoise, band_noise, r_adjustment
+from .scale_factor import ScaleFactorEstimate, _EpochArrays
+from .twostage import TwoStageFilter, solve_information
+from .validation import InputValidator, ValidationOptions, validate_batch
+
+#: at most this many re-estimations with the measured band noise (noise_level.py)
+_NOISE_ITERATIONS = 4
+
+
+def whitening(engine: TwoStageFilter) -> np.ndarray:
+    """``W = L^T`` with ``Lambda^-1 = L L^T`` (steady state): ``nu = W e`` has unit covariance."""
+    return np.linalg.cholesky(engine.lambda_inv_ss).T
+
+
+@dataclass(frozen=True)
+class ComOffsetStepReport:
+    """What one per-sample update did.
+
+    Attributes
+    ----------
+    t_s : float
+        Stamp [s].
+    nis : float
+        Pre-fit NIS (3 n_grs dof, NaN if no scale factors given or not yet determined).
+    accepted : bool
+        Epoch used.
+    rejections : tuple of (str, str)
+        (stream, reason) of inputs rejected at this epoch.
+    """
+
+    t_s: float
+    nis: float
+    accepted: bool
+    rejections: tuple[tuple[str, str], ...] = ()
+
+
+class ComOffsetEstimator:
+    """Default (``gls``) c.m.-offset estimator: per-sample (node) and bulk (offline) forms.
+
+    Parameters
+    ----------
+    instrument : InstrumentModel
+        Geometry, nominal d and noise budget.
+    grs_ids : sequence of int
+        GRS estimated jointly (one or both).
+    options : ComOffsetOptions, optional
+        Tuning.
+
+    Examples
+    --------
+    Per sample (a node; ``g`` is the latest :class:`ScaleFactorEstimate` and ``omega`` the rate
+    from :meth:`ScaleFactorEstimator.rate_estimate`)::
+
+        co = ComOffsetEstimator(instrument, (1, 2))
+        co.update(t, {1: v1, 2: v2}, omega, scale_factors=g)
+        d = co.estimate(g)
+
+    In bulk (offline)::
+
+        d = ComOffsetEstimator(instrument, (1, 2)).process_batch(t, voltages, omega, g)
+    """
+
+    method = "gls"
+
+    def __init__(self, instrument: InstrumentModel, grs_ids: Sequence[int] = (1, 2),
+                 options: ComOffsetOptions | None = None) -> None:
+        self.instrument = instrument
+        self.options = options or ComOffsetOptions()
+        self.model = ComOffsetModel(instrument, grs_ids, self.options)
+        self.grs_ids = self.model.grs_ids
+        self.filter = TwoStageFilter(self.model.state_space, self.model.n_columns, self.options.snap_tolerance)
+        self.validator = InputValidator(ValidationOptions(**{**self.options.validation.__dict__,
+                                                             "grs_ids": self.grs_ids,
+                                                             "sample_rate_hz": instrument.sample_rate_hz,
+                                                             "star_tracker_sigma_rad": float(np.max(
+                                                                 instrument.noise.star_tracker_sigma_rad))}))
+        self.gate = None if self.options.gate_probability is None else chi2_gate(self.model.m,
+                                                                                  self.options.gate_probability)
+        self.eiv_full = self.model.eiv_correction(self.filter.lambda_inv_ss)
+        self.eiv_sum = np.zeros((self.model.n_columns, self.model.n_columns))
+        self.n_eiv = 0
+        self.band_noise: BandNoise | None = None
+        self.t0_s: float | None = None
+        self.t_last_s = float("nan")
+        self.last_index: int | None = None
+        self.determined = False
+
+    # solution for given scale factors --------------------------------------------------------
+    def corrected_information(self) -> np.ndarray:
+        """(q, q) cross-product of the whitened basis columns (and SRP initial state), less the
+        expected errors-in-variables part: unbiased for any combination of the columns."""
+        info = self.filter.info.copy()
+        n = self.model.n_columns
+        info[:n, :n] -= self.eiv_sum
+        return info
+
+    def _beta_system(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Information and vector on (beta, x0) for scale factors g, with the EIV correction."""
+        model = self.model
+        q = self.filter.q_total
+        info_all = self.corrected_information()
+        a_y, a_x = model.combination(np.asarray(g, dtype=np.float64))
+        # append the SRP initial-state columns (x0) of the engine
+        a_xx = np.zeros((q, model.n_beta + 3))
+        a_xx[:model.n_columns, :model.n_beta] = a_x
+        a_xx[model.n_columns:, model.n_beta:] = np.eye(3)
+        a_yy = np.zeros(q)
+        a_yy[:model.n_columns] = a_y
+        info = a_xx.T @ info_all @ a_xx
+        vec = a_xx.T @ info_all @ a_yy
+        return 0.5 * (info + info.T), vec, a_xx, a_yy
+
+    def solve(self, g: ArrayLike) -> tuple[np.ndarray, np.ndarray, bool]:
+        """(beta (with SRP x0), covariance, determined) for scale factors g."""
+        info, vec, _, _ = self._beta_system(np.asarray(g, dtype=np.float64))
+        beta, cov, full = solve_information(info, vec)
+        if full and not self.determined:
+            n_d = self.model.n_d
+            _, a_x = self.model.combination(np.asarray(g, dtype=np.float64))
+            eiv_d = (a_x.T @ self.eiv_full @ a_x)[:n_d, :n_d]
+            fluctuation = math.sqrt(2.0 * max(self.n_eiv, 1)) * np.diag(eiv_d)
+            scale = np.sqrt(fluctuation)
+            largest = float(np.linalg.eigvalsh(cov[:n_d, :n_d] * scale[:, None] * scale[None, :])[-1])
+            self.determined = largest > 0.0 and 1.0 / largest > self.options.determination_margin
+        return beta, cov, full and self.determined
+
+    def jacobian(self, g: ArrayLike) -> np.ndarray:
+        """(n_d, n_g) dd^/dG at scale factors g."""
+        g = np.asarray(g, dtype=np.float64)
+        model = self.model
+        info, vec, a_xx, a_yy = self._beta_system(g)
+        beta, cov, _ = solve_information(info, vec)
+        info_all = self.corrected_information()
+        jac = np.zeros((model.n_d, model.n_g))
+        for j in range(model.n_g):
+            da_x = np.zeros_like(a_xx)
+            da_x[model.col_xj[j], :model.n_d] = np.eye(model.n_d)
+            da_y = np.zeros_like(a_yy)
+            da_y[j] = 1.0
+            d_info = da_x.T @ info_all @ a_xx + a_xx.T @ info_all @ da_x
+            d_vec = da_x.T @ info_all @ a_yy + a_xx.T @ info_all @ da_y
+            jac[:, j] = (cov @ (d_vec - d_info @ beta))[:model.n_d]
+        return jac
+
+    def estimate(self, scale_factors: ScaleFactorEstimate | tuple[ArrayLike, ArrayLike]) -> ComOffsetEstimate:
+        """Estimate of d for the given scale factors (their covariance is propagated).
+
+        Parameters
+        ----------
+        scale_factors : ScaleFactorEstimate or (G, P_G)
+            G of ``grs_ids`` in order (3 n_grs,) and its covariance.
+
+        Returns
+        -------
+        ComOffsetEstimate
+        """
+        g, p_g = self._scale_factors(scale_factors)
+        n_d = self.model.n_d
+        nan = np.full((n_d, n_d), np.nan)
+        if not np.all(np.isfinite(g)) or self.filter.n_updates == 0:
+            return ComOffsetEstimate(self.grs_ids, np.full(n_d, np.nan), nan, nan, nan, False, self.t_last_s,
+                                     self.filter.n_updates, float("nan"), self.validator.count_summary())
+        beta, cov, ok = self.solve(g)
+        if not ok:
+            return ComOffsetEstimate(self.grs_ids, np.full(n_d, np.nan), nan, nan, nan, False, self.t_last_s,
+                                     self.filter.n_updates, float("nan"), self.validator.count_summary())
+        jac = self.jacobian(g)
+        cov_noise = cov[:n_d, :n_d]
+        cov_total = cov_noise + jac @ p_g @ jac.T
+        info, _, a_xx, a_yy = self._beta_system(g)
+        g_joint = cov_gd = cov_gg = None
+        n_g = self.model.n_g
+        if self.options.joint and np.all(np.isfinite(p_g)) and np.all(np.linalg.eigvalsh(p_g) > 0.0):
+            joint = solve_joint(self.model, self.corrected_information(), g, p_g, beta)
+            beta = joint.beta
+            g_joint = joint.g
+            cov_total = joint.covariance[n_g:n_g + n_d, n_g:n_g + n_d]
+            cov_gd = joint.covariance[n_g:n_g + n_d, :n_g].copy()
+            cov_gg = joint.covariance[:n_g, :n_g].copy()
+            _, _, a_xx, a_yy = self._beta_system(g_joint)
+        w = a_yy - a_xx @ beta
+        chi2 = float(w @ self.filter.info @ w)
+        dof = max(self.filter.dof_total - info.shape[0], 1)
+        rejected = self.validator.count_summary()
+        if self.filter.n_rejected:
+            rejected.setdefault("epoch", {})["gated"] = self.filter.n_rejected
+        return ComOffsetEstimate(self.grs_ids, beta[:n_d].copy(), 0.5 * (cov_total + cov_total.T), cov_noise,
+                                 jac, True, self.t_last_s, self.filter.n_updates, chi2 / dof, rejected,
+                                 scale_factors_joint=g_joint, scale_factor_cross_covariance=cov_gd,
+                                 scale_factor_covariance_joint=cov_gg,
+                                 nis_band=float("nan") if self.band_noise is None else self.band_noise.nis,
+                                 noise_adjusted=bool(np.any(self.model.r_adjustment)))
+
+    def _scale_factors(self, scale_factors: ScaleFactorEstimate | tuple[ArrayLike, ArrayLike]
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        if isinstance(scale_factors, ScaleFactorEstimate):
+            values, covs = [], []
+            for g in self.grs_ids:
+                v, c = scale_factors.of(g)
+                values.append(v)
+                covs.append(c)
+            g_all = np.concatenate(values)
+            p = np.zeros((3 * len(self.grs_ids),) * 2)
+            idx = [scale_factors.grs_ids.index(g) for g in self.grs_ids]
+            for a, ia in enumerate(idx):
+                for b, ib in enumerate(idx):
+                    p[3 * a:3 * a + 3, 3 * b:3 * b + 3] = scale_factors.covariance[3 * ia:3 * ia + 3, 3 * ib:3 * ib + 3]
+            return g_all, p
+        g_all = np.asarray(scale_factors[0], dtype=np.float64).reshape(-1)
+        return g_all, np.asarray(scale_factors[1], dtype=np.float64).reshape(g_all.size, g_all.size)
+
+    def _engine_theta(self, g: np.ndarray, beta: np.ndarray) -> np.ndarray:
+        """Engine parameters (columns, x0) whose innovation combination is the residual at (g, beta)."""
+        model = self.model
+        theta = np.zeros(self.filter.q_total)
+        theta[model.col_data] = -g
+        theta[model.col_x0] = beta[:model.n_beta]
+        for j in range(model.n_g):
+            theta[model.col_xj[j]] = g[j] * beta[:model.n_d]
+        theta[model.n_columns:] = beta[model.n_beta:]
+        return theta
+
+    # per-sample path -------------------------------------------------------------------------
+    def _epoch_noise(self, present: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray]:
+        """(rows, R override, EIV correction) of an epoch with the GRS ``present`` ((n_grs,) bool)."""
+        if np.all(present):
+            return None, None, self.eiv_full
+        model = self.model
+        rows = np.repeat(present, 3)
+        grs = self.grs_ids[int(np.flatnonzero(present)[0])]
+        r = model.r_single[grs]
+        # weight of the EIV term: R^-1 of the rows present (the common-mode state term is negligible)
+        eiv = model.eiv_correction(np.linalg.inv(r[np.ix_(rows, rows)]), present)
+        return rows, r, eiv
+
+    def _tau(self, t_s: float) -> float:
+        return (float(t_s) - float(self.t0_s)) / self.options.trend_time_scale_s  # type: ignore[arg-type]
+
+    def start_new_segment(self) -> None:
+        """The next epoch starts a new segment (diffuse state): its data need not continue the dynamics
+        of the epochs before (a restarted source). The information on d is kept."""
+        if not self.filter.fresh:
+            self.filter.reset_segment()
+
+    def update(self, t_s: float, voltages: Mapping[int, ArrayLike] | None, omega_rad_s: ArrayLike | None = None,
+               scale_factors: ScaleFactorEstimate | tuple[ArrayLike, ArrayLike] | None = None
+               ) -> ComOffsetStepReport:
+        """Process one epoch of GRS voltages.
+
+        Parameters
+        ----------
+        t_s : float
+            Stamp [s].
+        voltages : mapping of int to array_like
+            GRS id to (6,) voltages [V] (absent: missing).
+        omega_rad_s : array_like, optional
+            (3,) body rate in CRF [rad/s] (None: zero; it enters only the small centripetal term).
+        scale_factors : ScaleFactorEstimate or (G, P_G), optional
+            Current scale factors, for the pre-fit NIS and gating (None: no NIS, no gating).
+
+        Returns
+        -------
+        ComOffsetStepReport
+        """
+        rejections: list[tuple[str, str]] = []
+        model = self.model
+        sums = np.zeros((1, model.n_grs, 3))
+        diffs = np.zeros((1, model.n_grs, 3))
+        rows = np.zeros(model.m, dtype=bool)
+        for gid, v in (voltages or {}).items():
+            check = self.validator.check_grs(t_s, int(gid), v)
+            if not check.ok:
+                rejections.append((f"grs{gid}", str(check.reason)))
+                continue
+            i = self.grs_ids.index(int(gid))
+            sums[0, i] = linear_sums(check.value)
+            diffs[0, i] = angular_differences(check.value)
+            rows[3 * i:3 * i + 3] = True
+        if not np.any(rows):
+            return ComOffsetStepReport(float(t_s), float("nan"), False, tuple(rejections))
+        if self.t0_s is None:
+            self.t0_s = float(t_s)
+        index = round((float(t_s) - self.t0_s) * self.instrument.sample_rate_hz)
+        if self.last_index is not None and index <= self.last_index:
+            rejections.append(("epoch", "out_of_order_stamp"))
+            return ComOffsetStepReport(float(t_s), float("nan"), False, tuple(rejections))
+        if self.last_index is not None:
+            for _ in range(index - self.last_index - 1):
+                self.filter.step(None)
+        self.last_index = index
+        self.t_last_s = float(t_s)
+        omega = np.zeros((1, 3)) if omega_rad_s is None else np.asarray(omega_rad_s, dtype=np.float64).reshape(1, 3)
+        if not np.all(np.isfinite(omega)):
+            omega = np.zeros((1, 3))
+        present = rows[0::3].copy()
+        basis = model.basis(sums, diffs, omega, np.array([self._tau(t_s)]), present[None, :])[0]
+        estimate = None
+        if scale_factors is not None:
+            g, _ = self._scale_factors(scale_factors)
+            if np.all(np.isfinite(g)) and self.filter.n_updates:
+                beta, cov, ok = self.solve(g)
+                if ok:
+                    theta = self._engine_theta(g, beta)
+                    _, _, a_xx, _ = self._beta_system(g)
+                    estimate = (theta, a_xx @ cov @ a_xx.T)
+        sel, r_step, eiv = self._epoch_noise(present)
+        info = self.filter.step(np.zeros(model.m), basis, rows=sel, r=r_step,
+                                gate=self.gate if estimate is not None else None, estimate=estimate)
+        if info.accepted:
+            self.eiv_sum += eiv
+            self.n_eiv += 1
+        else:
+            rejections.append(("epoch", "gated"))
+        return ComOffsetStepReport(float(t_s), info.nis, info.accepted, tuple(rejections))
+
+    # bulk path ----------------------------------------------------------------------------------
+    def process_batch(self, t_s: ArrayLike, voltages_v: ArrayLike, omega_rad_s: ArrayLike | None,
+                      scale_factors: ScaleFactorEstimate | tuple[ArrayLike, ArrayLike]) -> ComOffsetEstimate:
+        """Process a whole record in bulk.
+
+        Parameters
+        ----------
+        t_s : array_like
+            (n,) stamps [s].
+        voltages_v : array_like
+            (n, n_grs, 6) voltages of ``grs_ids`` in order [V] (NaN rows: missing).
+        omega_rad_s : array_like or None
+            (n, 3) body rate at the same stamps, CRF [rad/s] (NaN rows or None: zero).
+        scale_factors : ScaleFactorEstimate or (G, P_G)
+            Final scale factors (used for the NIS/gating pass and the estimate).
+
+        Returns
+        -------
+        ComOffsetEstimate
+        """
+        t = np.asarray(t_s, dtype=np.float64).reshape(-1)
+        volts = np.asarray(voltages_v, dtype=np.float64).reshape(t.size, len(self.grs_ids), 6)
+        omega_all = np.zeros((t.size, 3)) if omega_rad_s is None else np.asarray(omega_rad_s, dtype=np.float64)
+        omega_all = np.where(np.isfinite(omega_all), omega_all, 0.0)
+        if self.filter.n_updates:
+            raise RuntimeError("process_batch runs on a fresh estimator (use update() to continue)")
+        checked = validate_batch(t, np.full((t.size, 4), np.nan), volts, self.validator.options, self.grs_ids)
+        for stream, counts in checked.counts.items():
+            if stream == "star_tracker":
+                continue
+            for reason, number in counts.items():
+                self.validator.counts.setdefault(stream, Counter())[reason] += number
+        epochs = _EpochArrays.build(checked, t, volts)
+        if epochs.count == 0:
+            return self.estimate(scale_factors)
+        rows_in = np.flatnonzero((checked.grid_index >= 0) & np.any(checked.grs_ok, axis=1))
+        omega = omega_all[rows_in]
+        self.t0_s = float(epochs.t[0])
+        tau = (epochs.t - self.t0_s) / self.options.trend_time_scale_s
+        g, _ = self._scale_factors(scale_factors)
+        initial = copy.deepcopy(self.filter)
+        whitened = self._accumulate(initial, epochs, omega, tau, g)
+        self.band_noise = None if whitened is None else band_noise(whitened)
+        current = self.band_noise
+        for _ in range(_NOISE_ITERATIONS if self.options.adapt_noise else 0):
+            if current is None or not current.significant:
+                break
+            # the noise in the band that carries d differs from the model: estimate again with R
+            # changed to whiten that band (noise_level.py), so weights and covariance follow the data.
+            # Repeated: a filter with too small an R lets its SRP state take up part of the excess, so
+            # one measurement sees only part of it (2-3 passes for a force noise at 2x PSD).
+            adjustment = self.model.r_adjustment + r_adjustment(whitening(initial), current.covariance)
+            self.model = ComOffsetModel(self.instrument, self.grs_ids, self.options, adjustment)
+            initial = TwoStageFilter(self.model.state_space, self.model.n_columns, self.options.snap_tolerance)
+            self.eiv_full = self.model.eiv_correction(initial.lambda_inv_ss)
+            whitened = self._accumulate(initial, epochs, omega, tau, g)
+            current = None if whitened is None else band_noise(whitened)
+        self.last_index = int(epochs.index[-1])
+        self.t_last_s = float(epochs.t[-1])
+        return self.estimate(scale_factors)
+
+    def _accumulate(self, initial: TwoStageFilter, epochs: _EpochArrays, omega: np.ndarray, tau: np.ndarray,
+                    g: np.ndarray, evaluate_last: bool = True) -> np.ndarray | None:
+        """Accumulate the record from ``initial`` with the chi-square gate (a second pass without the
+        flagged epochs); returns the whitened post-fit innovations of the accepted solution (NaN
+        where not a regular epoch), or None when not evaluated."""
+        gated = np.zeros(epochs.count, dtype=bool)
+        whitened = None
+        for attempt in range(2):
+            self.filter = copy.deepcopy(initial)
+            self.eiv_sum = np.zeros_like(self.eiv_full)
+            self.n_eiv = 0
+            self.determined = False
+            self._drive(epochs, omega, tau, gated)
+            whitened = None
+            if not np.all(np.isfinite(g)) or (attempt == 1 and not evaluate_last):
+                break
+            beta, _, ok = self.solve(g)
+            if not ok or (self.gate is None and not evaluate_last):
+                break
+            nis, whitened = self._evaluate(initial, epochs, omega, tau, gated, g, beta)
+            if self.gate is None or attempt == 1:
+                break
+            new = (nis > self.gate) & ~gated
+            if not np.any(new):
+                break
+            gated |= new
+        self.filter.n_rejected = int(np.count_nonzero(gated))
+        return whitened
+
+    def _drive(self, epochs: _EpochArrays, omega: np.ndarray, tau: np.ndarray, gated: np.ndarray,
+               evaluate: tuple[np.ndarray, np.ndarray] | None = None, nis: np.ndarray | None = None,
+               innovations: np.ndarray | None = None) -> None:
+        """Run the filter over the epochs: accumulate, or (``evaluate = (g, beta)``) record post-fit NIS."""
+        model = self.model
+        theta = None if evaluate is None else evaluate
+        usable = np.any(epochs.grs_ok, axis=1) & ~gated
+        full = np.all(epochs.grs_ok, axis=1) & ~gated
+        if self.model.n_grs == 1:
+            full = usable
+        k = 0
+        count = epochs.count
+        zeros = np.zeros(model.m)
+        # run_end[k]: one past the last epoch of the run of full, consecutive epochs that starts at k
+        continues = np.zeros(count, dtype=bool)
+        continues[:-1] = full[:-1] & full[1:] & (np.diff(epochs.index) == 1)
+        breaks = np.flatnonzero(~continues)
+        run_end = breaks[np.searchsorted(breaks, np.arange(count))] + 1
+        while k < count:
+            if k > 0:
+                for _ in range(int(epochs.index[k] - epochs.index[k - 1] - 1)):
+                    self.filter.step(None)
+            if full[k]:  # a run of regular epochs (run_regular also takes the transient after an irregular one)
+                stop = int(run_end[k])
+                start = k
+                chunk = 32768
+                while start < stop:
+                    end = min(start + chunk, stop)
+                    if theta is None:
+                        basis = model.basis_factors(epochs.sums[start:end], epochs.diffs[start:end],
+                                                    omega[start:end], tau[start:end])
+                        self.filter.run_regular(np.zeros((end - start, model.m)), basis)
+                        self.eiv_sum += (end - start) * self.eiv_full
+                        self.n_eiv += end - start
+                    else:
+                        y_eval = model.residual(epochs.sums[start:end], epochs.diffs[start:end], omega[start:end],
+                                                tau[start:end], evaluate[0], evaluate[1])
+                        out = self.filter.run_regular(y_eval, want_innovations=innovations is not None)
+                        nis[start:end] = out.nis  # type: ignore[index]
+                        if innovations is not None and out.innovations is not None:
+                            innovations[start:end] = out.innovations
+                    start = end
+                k = stop
+                continue
+            if usable[k]:
+                present = epochs.grs_ok[k]
+                sel, r_step, eiv = self._epoch_noise(present)
+                if theta is None:
+                    basis = model.basis(epochs.sums[k:k + 1], epochs.diffs[k:k + 1], omega[k:k + 1],
+                                        tau[k:k + 1], present[None, :])[0]
+                    self.filter.step(zeros, basis, rows=sel, r=r_step)
+                    self.eiv_sum += eiv
+                    self.n_eiv += 1
+                else:
+                    y_eval = model.residual(epochs.sums[k:k + 1], epochs.diffs[k:k + 1], omega[k:k + 1],
+                                            tau[k:k + 1], evaluate[0], evaluate[1], present[None, :])[0]
+                    result = self.filter.step(y_eval, rows=sel, r=r_step)
+                    nis[k] = result.post_nis  # type: ignore[index]
+            else:
+                self.filter.step(None)
+            k += 1
+
+    def _evaluate(self, initial: TwoStageFilter, epochs: _EpochArrays, omega: np.ndarray, tau: np.ndarray,
+                  gated: np.ndarray, g: np.ndarray, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(post-fit NIS (L,), whitened post-fit innovations (L, m), NaN rows where not regular)."""
+        saved = self.filter
+        self.filter = initial.evaluation_copy(self._engine_theta(g, beta))
+        nis = np.zeros(epochs.count)
+        innovations = np.full((epochs.count, self.model.m), np.nan)
+        self._drive(epochs, omega, tau, gated, (g, beta), nis, innovations)
+        self.filter = saved
+        return nis, innovations @ whitening(initial).T
+
+    # checkpoint ---------------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        """Checkpoint (plain lists/numbers)."""
+        return {"method": self.method, "grs_ids": list(self.grs_ids), "filter": self.filter.state_dict(),
+                "validator": self.validator.state_dict(), "eiv_sum": self.eiv_sum.tolist(), "n_eiv": self.n_eiv,
+                "t0_s": self.t0_s, "t_last_s": self.t_last_s, "last_index": self.last_index,
+                "determined": self.determined}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Resume from a :meth:`state_dict` checkpoint."""
+        if tuple(state["grs_ids"]) != self.grs_ids or state["method"] != self.method:
+            raise ValueError("checkpoint of a different estimator configuration")
+        self.filter.load_state_dict(state["filter"])
+        self.validator.load_state_dict(state["validator"])
+        self.eiv_sum = np.asarray(state["eiv_sum"], dtype=np.float64)
+        self.n_eiv = int(state["n_eiv"])
+        self.t0_s = state["t0_s"]
+        self.t_last_s = float(state["t_last_s"])
+        self.last_index = state["last_index"]
+        self.determined = bool(state["determined"])
+
+    @classmethod
+    def from_state_dict(cls, instrument: InstrumentModel, state: Mapping[str, Any],
+                        options: ComOffsetOptions | None = None) -> ComOffsetEstimator:
+        """New estimator resumed from a checkpoint."""
+        est = cls(instrument, tuple(state["grs_ids"]), options)
+        est.load_state_dict(state)
+        return est
