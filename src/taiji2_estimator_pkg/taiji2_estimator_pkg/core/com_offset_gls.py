@@ -20,11 +20,12 @@ from numpy.typing import ArrayLike
 
 from .com_offset_estimate import ComOffsetEstimate
 from .com_offset_model import ComOffsetModel, ComOffsetOptions
+from .epoch_arrays import EpochArrays
 from .instrument import InstrumentModel, angular_differences, linear_sums
 from .joint_com_offset import solve_joint
 from .kalman import chi2_gate
 from .noise_level import BandNoise, band_noise, r_adjustment
-from .scale_factor import ScaleFactorEstimate, _EpochArrays
+from .scale_factor import ScaleFactorEstimate
 from .twostage import TwoStageFilter, solve_information
 from .validation import InputValidator, ValidationOptions, validate_batch
 
@@ -370,7 +371,7 @@ class ComOffsetEstimator:
                 continue
             for reason, number in counts.items():
                 self.validator.counts.setdefault(stream, Counter())[reason] += number
-        epochs = _EpochArrays.build(checked, t, volts)
+        epochs = EpochArrays.build(checked, t, volts)
         if epochs.count == 0:
             return self.estimate(scale_factors)
         rows_in = np.flatnonzero((checked.grid_index >= 0) & np.any(checked.grs_ok, axis=1))
@@ -399,7 +400,7 @@ class ComOffsetEstimator:
         self.t_last_s = float(epochs.t[-1])
         return self.estimate(scale_factors)
 
-    def _accumulate(self, initial: TwoStageFilter, epochs: _EpochArrays, omega: np.ndarray, tau: np.ndarray,
+    def _accumulate(self, initial: TwoStageFilter, epochs: EpochArrays, omega: np.ndarray, tau: np.ndarray,
                     g: np.ndarray, evaluate_last: bool = True) -> np.ndarray | None:
         """Accumulate the record from ``initial`` with the chi-square gate (a second pass without the
         flagged epochs); returns the whitened post-fit innovations of the accepted solution (NaN
@@ -428,7 +429,7 @@ class ComOffsetEstimator:
         self.filter.n_rejected = int(np.count_nonzero(gated))
         return whitened
 
-    def _drive(self, epochs: _EpochArrays, omega: np.ndarray, tau: np.ndarray, gated: np.ndarray,
+    def _drive(self, epochs: EpochArrays, omega: np.ndarray, tau: np.ndarray, gated: np.ndarray,
                evaluate: tuple[np.ndarray, np.ndarray] | None = None, nis: np.ndarray | None = None,
                innovations: np.ndarray | None = None) -> None:
         """Run the filter over the epochs: accumulate, or (``evaluate = (g, beta)``) record post-fit NIS."""
@@ -490,7 +491,7 @@ class ComOffsetEstimator:
                 self.filter.step(None)
             k += 1
 
-    def _evaluate(self, initial: TwoStageFilter, epochs: _EpochArrays, omega: np.ndarray, tau: np.ndarray,
+    def _evaluate(self, initial: TwoStageFilter, epochs: EpochArrays, omega: np.ndarray, tau: np.ndarray,
                   gated: np.ndarray, g: np.ndarray, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(post-fit NIS (L,), whitened post-fit innovations (L, m), NaN rows where not regular)."""
         saved = self.filter

@@ -18,9 +18,10 @@ from numpy.typing import ArrayLike
 from .attitude import SmoothingDerivative
 from .com_offset_estimate import ComOffsetEstimate
 from .com_offset_model import cross_matrix
+from .epoch_arrays import EpochArrays
 from .instrument import InstrumentModel, linear_scale_factors
 from .kalman import KalmanFilter
-from .scale_factor import ScaleFactorEstimate, _EpochArrays
+from .scale_factor import ScaleFactorEstimate
 from .validation import InputValidator, ValidationOptions, validate_batch
 
 
@@ -121,7 +122,7 @@ class PaperComOffsetFilter:
         t = np.asarray(t_s, dtype=np.float64).reshape(-1)
         volts = np.asarray(voltages_v, dtype=np.float64).reshape(t.size, len(self.grs_ids), 6)
         checked = validate_batch(t, quat_xyzw, volts, self.validator.options, self.grs_ids)
-        epochs = _EpochArrays.build(checked, t, volts)
+        epochs = EpochArrays.build(checked, t, volts)
         w = self.options.window
         m = self.smoother.half
         count = epochs.count

@@ -21,14 +21,11 @@ sensitivity matrix and its (q, q) outer product: for the c.m.-offset estimator (
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from taiji2_estimator_pkg.core.first_order import first_order_recursion
-
-if TYPE_CHECKING:
-    from taiji2_estimator_pkg.core.twostage import TwoStageFilter
 
 __all__ = ["RegressorFactors", "run_steady_factored"]
 
@@ -63,8 +60,12 @@ class RegressorFactors:
         return (self.series @ self.patterns.reshape(n_s, m * p)).reshape(-1, m, p)
 
 
-def run_steady_factored(filt: TwoStageFilter, y: np.ndarray, factors: RegressorFactors) -> None:
+def run_steady_factored(filt: Any, y: np.ndarray, factors: RegressorFactors) -> None:
     """Accumulate regular samples at the steady state (same sums as ``TwoStageFilter._run_steady``).
+
+    ``filt`` is the :class:`~.twostage.TwoStageFilter` that calls this (its steady-state gains, modes
+    and sums are read and updated in place); typed ``Any`` so that imports run one way, twostage ->
+    factored_steady.
 
     Requires real modes, no known inputs and no input regressors (``u0 = U = None``), accumulation
     mode (not an evaluation copy). Updates the filter's state, sensitivities and sums in place.
