@@ -105,6 +105,7 @@ def main() -> None:
               f"{len(os.sched_getaffinity(0))}); {args.repeats} rounds; load: {args.hogs} x python -c '{HOG}'")
         print(f"BLAS threads inside taiji2 calibrate (threadpoolctl): {json.loads(check.stdout)['blas_threads']}")
         timed(calibrate, policy), timed(baseline, policy)  # warm-up, untimed: bytecode caches, page cache
+        load_before = os.getloadavg()[0]
         runs: dict[str, list[tuple[float, float]]] = {k: [] for k in (
             "idle calibrate", "idle rosbags", "loaded calibrate", "loaded rosbags", "loaded calibrate, no policy")}
         for _ in range(args.repeats):
@@ -114,15 +115,20 @@ def main() -> None:
                 runs["loaded calibrate"].append(timed(calibrate, policy))
                 runs["loaded rosbags"].append(timed(baseline, policy))
                 runs["loaded calibrate, no policy"].append(timed(calibrate, unlimited))
+    load_after = os.getloadavg()[0]
     for label, values in runs.items():
         print(_line(label + (f" (TAIJI2_BLAS_THREADS={cores})" if "no policy" in label else ""), values))
     med = {k: statistics.median(w for w, _ in v) for k, v in runs.items()}
     slowdown = med["loaded calibrate"] / med["idle calibrate"]
     speedup = med["loaded rosbags"] / med["loaded calibrate"]
+    base_slowdown = med["loaded rosbags"] / med["idle rosbags"]
     print(f"loaded / idle calibrate: {slowdown:.2f}x (goal <= 2.5x); rosbags read / calibrate, both loaded: "
-          f"{speedup:.2f}x (goal >= 2x); rosbags loaded / idle: {med['loaded rosbags'] / med['idle rosbags']:.2f}x; "
+          f"{speedup:.2f}x (goal >= 2x); rosbags loaded / idle: {base_slowdown:.2f}x (the CPU share the load "
+          f"leaves a process that uses no BLAS); calibrate's slowdown / rosbags': {slowdown / base_slowdown:.2f}; "
           f"without the policy, loaded / idle calibrate: "
           f"{med['loaded calibrate, no policy'] / med['idle calibrate']:.2f}x")
+    print(f"1-min load average before the rounds {load_before:.1f}, after {load_after:.1f} (the {args.hogs} "
+          f"CPU-bound processes of the loaded runs included; more means other jobs shared the machine)")
 
 
 if __name__ == "__main__":
