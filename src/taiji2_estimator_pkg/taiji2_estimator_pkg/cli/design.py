@@ -109,9 +109,9 @@ def main(args: argparse.Namespace) -> int:
         return _fail(f"--range-margin: must be in (0, 1], got {args.range_margin!r}")
     if not (np.isfinite(args.max_attitude_rad) and args.max_attitude_rad > 0.0):
         return _fail(f"--max-attitude-rad: must be > 0, got {args.max_attitude_rad!r}")
-    if not (np.isfinite(args.time_limit_s) and args.time_limit_s > 0.0):
+    if not args.time_limit_s > 0.0:  # inf: no limit
         return _fail(f"--time-limit-s: must be > 0, got {args.time_limit_s!r}")
-    if not (np.isfinite(args.budget_s) and args.budget_s >= 0.0):
+    if not args.budget_s >= 0.0:  # inf: no cap
         return _fail(f"--budget-s: must be >= 0, got {args.budget_s!r}")
     if args.max_evaluations < 1:
         return _fail(f"--max-evaluations: must be >= 1, got {args.max_evaluations!r}")
@@ -195,7 +195,8 @@ def main(args: argparse.Namespace) -> int:
         "binding_constraint": binding, "evaluations": result.evaluations,
         "search": {"evaluations": result.evaluations, "max_evaluations": result.max_evaluations,
                    "generations": result.generations, "max_generations": args.generations,
-                   "wall_cap_s": result.budget_s, "wall_s": result.wall_s, "truncated": result.truncated,
+                   "wall_cap_s": result.budget_s if np.isfinite(result.budget_s) else None,
+                   "wall_s": result.wall_s, "truncated": result.truncated,
                    "x": [float(v) for v in result.x]},
         "constraints": {"range_margin": constraints.range_margin, "range_m_s2": problem.range_m_s2,
                         "max_attitude_rad": constraints.max_attitude_rad, "min_thrust_n": problem.min_thrust_n,

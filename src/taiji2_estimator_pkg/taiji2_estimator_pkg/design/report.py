@@ -94,7 +94,7 @@ def _search_line(report: dict) -> str:
     size = (f"{search['evaluations']} of at most {search['max_evaluations']} evaluations, "
             f"{search['generations']} of {search['max_generations']} generations of the global search, then the polish")
     if search["truncated"]:
-        return (f"Search: **truncated** by the wall-clock cap of {search['wall_cap_s']:.0f} s after {size}: "
+        return (f"Search: **truncated** by the wall-clock cap of {search['wall_cap_s'] or 0:.0f} s after {size}: "
                 f"this design depends on the machine's speed; another run with seed {report['seed']} may differ "
                 f"(raise --budget-s / --time-limit-s or lower --max-evaluations).")
     return (f"Search: complete, {size} ({search['wall_s']:.0f} s): bounded by evaluations, the same design for "
