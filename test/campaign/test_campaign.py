@@ -113,6 +113,8 @@ def test_failing_case_is_recorded_and_the_campaign_goes_on(tmp_path):
     ({"effect_sets": [[{"name": "no_such_effect"}]]}, "effect_sets[0]"),
     ({"overrides": {"spacecraft.mass_kg": -1.0}}, "spacecraft.mass_kg"),
     ({"layouts": ["type9"]}, "layout"),
+    ({"fidelities": ["high"]}, "fidelities"),
+    ({"model_overrides": [1]}, "model_overrides"),
 ])
 def test_bad_spec_names_the_key(spec, key):
     with pytest.raises(SpecError) as info:
@@ -154,3 +156,26 @@ def test_cases_are_deterministic_for_their_seed():
 
     # bit-identical (NaN where a 300-s record does not determine d)
     np.testing.assert_array_equal([r["estimate"] for r in first["rows"]], [r["estimate"] for r in second["rows"]])
+
+
+def test_reference_fidelity_and_model_overrides_reach_the_case():
+    # data from the reference simulator with 2x the force-noise PSD, estimators on the nominal budget:
+    # the rows say so, the bound is the data's (the same layout with the 2x budget) and the grouping
+    # and hash tell the cases apart; a spec without these keys keeps its former case hashes
+    from taiji2_estimator_pkg.campaign.case import run_case
+    from taiji2_estimator_pkg.campaign.spec import case_hash
+
+    plain = expand_cases(load_spec({**SMALL, "seeds": [3], "durations_s": [1200]}))[0]
+    body = {k: v for k, v in plain.items() if k not in ("fidelity", "model_overrides", "group", "case_hash")}
+    assert case_hash(body) == plain["case_hash"]
+    spec = load_spec({**SMALL, "seeds": [3], "durations_s": [1200], "fidelities": ["reference"],
+                      "overrides": {"noise.thruster_force.asd_n_rthz": 2e-7},
+                      "model_overrides": {"noise.thruster_force.asd_n_rthz": 1e-7}})
+    case = expand_cases(spec)[0]
+    assert case["case_hash"] != plain["case_hash"] and "fidelity=reference" in case["group"]
+    result = run_case(case)
+    assert result["status"] == "ok", result["error"]
+    d_rows = [r for r in result["rows"] if ".d_" in r["parameter"] and not r["parameter"].startswith("diff")]
+    assert all(r["fidelity"] == "reference" for r in result["rows"])
+    # 4x the force PSD in the data: the c.m.-offset stage measures it in the band of d
+    assert all(r["noise_adjusted"] and r["nis_band"] > 1.5 for r in d_rows)

@@ -140,7 +140,7 @@ def case_hash(case: Mapping[str, Any]) -> str:
     """Content hash of a case (inputs only; a layout file contributes its text)."""
     body = {k: case.get(k) for k in (*CASE_KEYS, "methods", "crlb", "diagnose")}
     # defaults leave the hash of the cases from before these keys existed unchanged
-    if body.get("fidelity", "standard") == "standard":
+    if body.get("fidelity") in (None, "standard"):
         body.pop("fidelity")
     if not body.get("model_overrides"):
         body.pop("model_overrides")
