@@ -49,7 +49,8 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     },
     "com_offset_estimator": {
         "layout": "type1", "method": "gls", "grs_ids": [1, 2], "detrend": "linear", "trend_time_scale_s": 1000.0,
-        "joint": True, "adapt_noise": True, "gate_probability": 1e-6, "snap_tolerance": 1e-10, "determination_margin": 20.0, "paper.window": 2001,
+        "joint": True, "adapt_noise": True, "gate_probability": 1e-6, "snap_tolerance": 1e-10,
+        "determination_margin": 20.0, "paper.window": 2001,
         "paper.polyorder": 2, "paper.initial_sigma_m": 0.01, "paper.detrend_sigma": 1e-6,
         "paper.gate_probability": 0.0, **_VALIDATION, "checkpoint_file": "", "checkpoint_period_s": 10.0,
     },
