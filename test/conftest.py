@@ -10,6 +10,11 @@ import pytest
 
 # The embedded runtime is what these tests exercise, also on a machine where rclpy imports.
 os.environ.setdefault("TAIJI2_RUNTIME", "cyclonedds")
+# The project's BLAS policy (docs/threads.md) for the test processes and the graphs they start, as
+# every entry point applies it: BLAS threads spinning on small matrices slow a busy machine tenfold.
+from taiji2_runtime.threads import limit_blas_threads
+
+limit_blas_threads()
 # A private DDS domain per test session keeps parallel sessions on one host apart; the xdist workers
 # of one session (gw0, gw1, ...) inherit it and each moves to a domain of its own.
 os.environ.setdefault("ROS_DOMAIN_ID", str(100 + os.getpid() % 100))
