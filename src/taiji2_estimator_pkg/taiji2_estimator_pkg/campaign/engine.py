@@ -11,7 +11,8 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -20,8 +21,16 @@ from .case import run_case
 from .spec import expand_cases
 from .store import done_case_hashes, provenance, write_chunk
 
-#: One BLAS thread per worker process: the parallelism is across cases.
-WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+#: Environment each nanny of the embedded cluster sets before it spawns its worker process (Dask's
+#: ``distributed.nanny.pre-spawn-environ``; None removes a variable from Dask's defaults). One BLAS
+#: thread per worker process: the parallelism is across cases. No ``MALLOC_TRIM_THRESHOLD_`` (Dask
+#: sets 65536): it fixes glibc's allocator thresholds, every array above 128 KiB becomes a fresh
+#: mmap, and a case costs 2.4-2.5x its time in a plain process (see :mod:`.worker`).
+WORKER_PRE_SPAWN_ENV: dict[str, str | None] = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+                                               "MKL_NUM_THREADS": "1", "MALLOC_TRIM_THRESHOLD_": None}
+#: Register :class:`.worker.CampaignWorkerSetup` on the cluster (restores glibc's thresholds in a
+#: worker started with Dask's default environment, e.g. on an existing cluster).
+WORKER_SETUP = True
 
 
 @dataclass
@@ -76,8 +85,7 @@ def run_campaign(spec: Mapping[str, Any], out_dir: str | os.PathLike[str], *, sc
     _say(progress, f"campaign {spec['name']!r}: {len(cases)} cases, {run.skipped} already done, {len(todo)} to run")
     if not todo:
         return run
-    client, cluster = connect(scheduler, workers)
-    try:
+    with open_cluster(scheduler, workers) as client:
         run.workers = len(client.scheduler_info().get("workers", {}))
         _say(progress, f"dask: {run.workers} workers; dashboard: {_dashboard(client)}")
         started = time.perf_counter()  # wall time of the cases, cluster start-up excluded
@@ -109,36 +117,69 @@ def run_campaign(spec: Mapping[str, Any], out_dir: str | os.PathLike[str], *, sc
             # whatever finished is kept, also on Ctrl-C
             if buffer:
                 run.files.append(write_chunk(out, buffer, meta))
-            for future in futures:
-                future.cancel()
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+            # an interrupted run cancels what is left, in one message (after a complete run
+            # nothing is)
+            pending = [future for future in futures if not future.done()]
+            if pending:
+                client.cancel(pending)
     return run
 
 
-def connect(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
-    """(client, cluster): a client of ``scheduler``, or of a new LocalCluster (one single-threaded,
-    one-BLAS-thread worker process per core, or ``workers``) whose cluster the caller closes.
+@contextmanager
+def open_cluster(scheduler: str | None, workers: int | None) -> Iterator[Any]:
+    """A Dask client set up for campaign cases, of ``scheduler`` or of a new LocalCluster.
+
+    The LocalCluster has one single-threaded, one-BLAS-thread worker process per core (or
+    ``workers``) started with :data:`WORKER_PRE_SPAWN_ENV`; on any cluster each worker runs
+    :class:`.worker.CampaignWorkerSetup`. On exit the client is closed before the cluster (no
+    worker or client is left talking to a closed scheduler), and the caller's environment is what
+    it was before (Dask's nannies write their pre-spawn environment into this process's).
 
     Raises
     ------
     ConnectionError
         The scheduler cannot be reached.
     """
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client
 
-    if scheduler:
+    saved_environ = dict(os.environ)
+    cluster = None
+    try:
+        if scheduler:
+            try:
+                client = Client(scheduler, timeout="10s")
+            except (OSError, TimeoutError) as exc:
+                raise ConnectionError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+        else:
+            cluster = _local_cluster(workers or os.cpu_count() or 1)
+            client = Client(cluster)
         try:
-            return Client(scheduler, timeout="10s"), None
-        except (OSError, TimeoutError) as exc:
-            raise ConnectionError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
-    os.environ.update(WORKER_ENV)  # inherited by the worker processes the nannies start
-    n = workers or os.cpu_count() or 1
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           dashboard_address=":0" if _has_bokeh() else None, silence_logs=40)
-    return Client(cluster), cluster
+            if WORKER_SETUP:
+                from .worker import CampaignWorkerSetup
+
+                client.register_plugin(CampaignWorkerSetup())
+            yield client
+        finally:
+            client.close()
+    finally:
+        try:
+            if cluster is not None:
+                cluster.close()
+        finally:
+            os.environ.clear()
+            os.environ.update(saved_environ)
+
+
+def _local_cluster(workers: int) -> Any:
+    import dask
+    from dask.distributed import LocalCluster
+
+    pre_spawn = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_PRE_SPAWN_ENV}
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": pre_spawn}):
+        # the HTTP server (dashboard with bokeh, /health and metrics without) on a free port: the
+        # default 8787 warns when another cluster holds it
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                            silence_logs=40)
 
 
 def _has_bokeh() -> bool:
