@@ -168,6 +168,57 @@ def test_a_restarted_node_resumes_from_its_checkpoint(context, executor, experim
     np.testing.assert_allclose(resumed.values, reference.values, rtol=1e-9)
 
 
+def test_a_restarted_node_reports_its_resume_with_its_state_also_without_new_data_and_to_a_late_subscriber(
+        context, executor, experiment, tmp_path):
+    # /diagnostics is volatile: a restarted estimator that named its resume in one report only, once data
+    # beyond its checkpoint arrived, said nothing to a subscriber that matched it later (discovery on a
+    # loaded machine: the fault matrix's monitor) and, with no new data (the run over), only "starved"
+    out = experiment
+    checkpoint = Path(tmp_path) / "sf.json"
+    args = ["--ros-args", "-p", f"checkpoint_file:={checkpoint}"]
+    feeder = _Feeder(context)
+    executor.add_node(feeder.node)
+    first = ScaleFactorEstimatorNode(context=context, cli_args=args)
+    executor.add_node(first)
+    assert spin_until(executor, lambda: feeder.star.get_subscription_count() >= 1)
+    third = N // 3
+    _feed(feeder, executor, out, range(third))
+    third_ns = round(out.t_s[third - 1] * 1e9)
+    assert spin_until(executor, lambda: first.assembler._released_ns >= third_ns, timeout_s=60)
+    first.destroy_node()  # checkpoint written at shutdown, at the last epoch
+    checkpoint_s = first.last_t_ns / 1e9
+    restored = first.estimator.estimate().n_samples
+    feeder.estimates.clear()
+    second = ScaleFactorEstimatorNode(context=context, cli_args=args)
+    executor.add_node(second)
+    warn = messages.diagnostic_msgs.DiagnosticStatus.WARN
+
+    def reports(statuses, *words):
+        return [s for s in statuses if s.name == "scale_factor_estimator" and s.level == warn
+                and all(w in s.message for w in words)]
+
+    def samples_used(status):
+        return json.loads({kv.key: kv.value for kv in status.values}["samples_used"])
+
+    # no data yet: the resume is named with the restored state, and the restored estimate is published (latched)
+    resumed = f"resumed from checkpoint at t = {checkpoint_s:.1f} s"
+    assert spin_until(executor, lambda: reports(feeder.diagnostics, resumed, "no data beyond it yet"), timeout_s=10)
+    assert samples_used(reports(feeder.diagnostics, resumed)[-1]) == restored
+    assert spin_until(executor, lambda: feeder.estimates, timeout_s=10)
+    assert feeder.estimates[-1].samples_used == restored
+    assert feeder.estimates[-1].header.stamp.sec + feeder.estimates[-1].header.stamp.nanosec / 1e9 == checkpoint_s
+    # data beyond the checkpoint (none lost here): the data gap is named, and still to a subscriber that
+    # matches the restarted node after its first report of it
+    _feed(feeder, executor, out, range(third, N))
+    assert spin_until(executor, lambda: reports(feeder.diagnostics, resumed, "data gap 0.1 s"), timeout_s=60)
+    late: list = []
+    listener = rclpy.node.Node("late_listener", context=context)
+    listener.create_subscription(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics",
+                                 lambda m: late.extend(m.status), 100)
+    executor.add_node(listener)
+    assert spin_until(executor, lambda: reports(late, resumed, "data gap 0.1 s"), timeout_s=10)
+
+
 def test_a_run_ending_inside_a_publish_period_publishes_its_last_epoch(context, executor, experiment):
     # data stop at 299.6 s, inside the 1-s publish period that began at 299.0 s: once the data have
     # been silent for max_stream_silence_s, both estimators publish the estimate of the last epoch

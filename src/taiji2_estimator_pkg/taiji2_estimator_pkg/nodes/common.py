@@ -26,6 +26,11 @@ METHODS = ("gls", "paper")
 _NS = 1_000_000_000
 #: a health tick (1 s period) this much later than due is reported as a pause of the process [s]
 PAUSE_REPORTED_AFTER_S = 2.0
+#: health reports (1 s apart) that keep a resume from a checkpoint at WARN once its data gap is known. It is
+#: WARN from the restart until then, and named in every later report: /diagnostics is volatile, and a
+#: subscriber that matches the restarted process late (discovery on a loaded machine) or joins later would
+#: miss a single report
+RESUME_WARN_REPORTS = 10
 
 
 def descriptor(description: str, *, low: float | None = None, high: float | None = None) -> Any:
@@ -183,7 +188,7 @@ class EstimatorNode(rclpy.node.Node):
         #: stamp of the first sample beyond the checkpoint after the resume - checkpoint time [s] (samples
         #: at or before the checkpoint, e.g. a restarted simulator's rerun, are refused and counted instead)
         self.data_gap_s: float | None = None
-        self.resume_reported = False
+        self.resume_warn_left = RESUME_WARN_REPORTS
         self.last_health_wall = time.monotonic()
         self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
         steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
@@ -195,6 +200,8 @@ class EstimatorNode(rclpy.node.Node):
         self.last_data_wall = time.monotonic()
         if self.resumed_from_ns is not None and self.data_gap_s is None and t_ns > self.resumed_from_ns:
             self.data_gap_s = (t_ns - self.resumed_from_ns) / 1e9
+            self.get_logger().info(f"first data beyond the checkpoint at t = {t_ns / 1e9:.1f} s: data gap "
+                                   f"{self.data_gap_s:.1f} s")
         for epoch in self.assembler.add(stream, t_ns, payload, self.last_data_wall):
             self._process_epoch(epoch)
 
@@ -281,6 +288,24 @@ class EstimatorNode(rclpy.node.Node):
         core = self.last_estimate.rejected if self.last_estimate is not None else {}
         return self.node_rejections.merged(core, {"epoch_alignment": alignment} if alignment else {})
 
+    def _with_resume(self, level: str, text: str) -> tuple[str, str]:
+        """(level, message) with this process's resume from a checkpoint named, if it resumed from one.
+
+        WARN from the restart until the first data beyond the checkpoint (``no data beyond it yet``: a
+        restarted estimator that gets no new data says so, not only that it is starved) and for
+        :data:`RESUME_WARN_REPORTS` reports after it (``data gap``); named in every report after that,
+        at the level of the other conditions. Other conditions stay named in the same message."""
+        if self.resumed_from_ns is None:
+            return level, text
+        note = f"resumed from checkpoint at t = {self.resumed_from_ns / 1e9:.1f} s after a restart; " + (
+            "no data beyond it yet" if self.data_gap_s is None else
+            f"data gap {self.data_gap_s:.1f} s (samples published meanwhile are lost to this estimate)")
+        if self.data_gap_s is not None and self.resume_warn_left <= 0:
+            return level, f"{text}; {note}"
+        if self.data_gap_s is not None:
+            self.resume_warn_left -= 1
+        return "WARN", note if level == "OK" else f"{text}; {note}"
+
     def publish_health(self, waiting_for: str | None = None) -> None:
         """``/diagnostics``: OK, or WARN when starved, rejecting input (named), or inconsistent."""
         estimate = self.last_estimate
@@ -297,13 +322,9 @@ class EstimatorNode(rclpy.node.Node):
         self.last_health_wall = now
         if paused_s > PAUSE_REPORTED_AFTER_S:
             level, text = "WARN", f"paused: not scheduled for {paused_s:.1f} s (stopped or starved of CPU)"
-        if self.data_gap_s is not None and not self.resume_reported:
-            self.resume_reported = True
-            level, text = "WARN", (f"resumed from checkpoint at t = {self.resumed_from_ns / 1e9:.1f} s after a "
-                                   f"restart; data gap {self.data_gap_s:.1f} s (samples published meanwhile "
-                                   "are lost to this estimate)")
         if waiting_for and level == "OK":
             text = f"waiting for {waiting_for}"
+        level, text = self._with_resume(level, text)
         status = diagnostic(self.get_name(), level, text, {
             "method": self.p["method"], "samples_used": int(estimate.n_samples) if estimate else 0,
             "rejected": counts, "nis_mean": None if estimate is None else estimate.nis_mean,

@@ -41,7 +41,7 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
         super().__init__("scale_factor_estimator", **node_kwargs)
         self.estimator = make_scale_factor_estimator(self.instrument, self.p)
         self.last_nis = float("nan")
-        self.resume()
+        resumed = self.resume()
 
         t = messages.taiji2_msgs
         qos = common.raw_qos()
@@ -53,6 +53,11 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
                                                        common.estimate_qos())
                               for g in GRS_IDS}
         self.rate_pub = self.create_publisher(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, qos)
+        if resumed is not None:
+            # the restored estimate, latched: the killed process's estimates went with it, and a restart after
+            # the run's end gets no data that would publish one (health reports its samples from now on)
+            self.last_t_ns = resumed
+            self.publish_estimate(resumed)
         self.get_logger().info(f"method {self.p['method']}, nominal model {self.p['layout']}, publishing every "
                                f"{self.p['publish_period_s']} s of data")
 
