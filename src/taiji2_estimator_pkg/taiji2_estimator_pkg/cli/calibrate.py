@@ -6,7 +6,8 @@ estimator cores as the nodes, in bulk, and prints the result table, or with --js
 object with, per GRS, "scale_factors", "scale_factors_cov", "com_offset" (CRF, m),
 "com_offset_cov", plus "com_offset_difference" (d1 - d2) and its covariance, and the counts of
 samples used and rejected (per topic and reason, each sample once) and of the grid samples missing
-per topic ("missing": no message at that time; not rejected).
+per topic ("missing": no message at that time; not rejected). BAG may also be a CCSDS packet file
+or directory (docs/interfaces.md), recognised by content; its defects are counted per topic.
 """
 
 from __future__ import annotations
@@ -18,12 +19,15 @@ import time
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("bag", help="ROS 2 bag directory (MCAP or sqlite3)")
+    parser.add_argument("bag", help="ROS 2 bag directory (MCAP or sqlite3), or a CCSDS packet file or directory")
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--layout", default="type1", help="built-in nominal model: type1 | type2 (default type1)")
     source.add_argument("--config", default="", help="nominal model YAML (simulator config format)")
     parser.add_argument("--method", default="gls", choices=("gls", "paper"), help="estimator method (default gls)")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    parser.add_argument("--time-correlation", metavar="FILE", default="",
+                        help="packets: onboard -> contract time YAML (default: the packet directory's "
+                             "time_correlation.yaml, else identity)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -34,9 +38,10 @@ def main(args: argparse.Namespace) -> int:
     from taiji2_estimator_pkg.calibration import align_streams, calibrate
     from taiji2_estimator_pkg.core.instrument import InstrumentModel
     from taiji2_estimator_pkg.io import load_raw_bag
+    from taiji2_estimator_pkg.io.raw_packets import time_correlation_from
     from taiji2_estimator_pkg.report import format_table
 
-    raw = load_raw_bag(args.bag)
+    raw = load_raw_bag(args.bag, correlation=time_correlation_from(args.time_correlation))
     instrument = InstrumentModel.from_layout(args.config or args.layout)
     grs = {gid: (raw.grs(gid).stamp_ns, raw.grs(gid).voltages_v) for gid in (1, 2)}
     record = align_streams(raw.star_tracker.stamp_ns, raw.star_tracker.quat_xyzw, grs, instrument.sample_rate_hz)
@@ -53,6 +58,8 @@ def main(args: argparse.Namespace) -> int:
         return 0
     for line in raw.report_lines():
         print(line)
+    if raw.packets is not None:
+        print("\n".join(raw.packets.lines()))
     print(format_table(table))
     rejected = table.extra["rejected"]
     if rejected:

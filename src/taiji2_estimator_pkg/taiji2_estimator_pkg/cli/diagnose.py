@@ -7,7 +7,8 @@ model channel by channel, band by band and segment by segment, tests every effec
 (timing and actuation included) as an extension of the model, checks each on held-out data, names
 only the effects that stand on their own, and writes report.md, report.json and PNG plots into
 --out. Also accepts an ``.npz`` file with the arrays ``t_s``, ``st_quat_xyzw``, ``voltages_v``
-(n, 2, 6) and ``torque_cmd_n_m`` (n, 3) on one grid. Method: docs/diagnosis.md.
+(n, 2, 6) and ``torque_cmd_n_m`` (n, 3) on one grid, or a CCSDS packet file or directory
+(docs/interfaces.md, recognised by content). Method: docs/diagnosis.md.
 
 Exit status: 0 diagnosed, 3 insufficient data, 2 bad input (one-line error).
 """
@@ -26,7 +27,8 @@ _INSUFFICIENT = 3
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``taiji2 diagnose``."""
-    parser.add_argument("bag", help="recorded experiment: bag directory, .mcap/.db3 file, or .npz arrays")
+    parser.add_argument("bag", help="recorded experiment: bag directory, .mcap/.db3 file, .npz arrays, or a CCSDS "
+                                    "packet file or directory")
     parser.add_argument("--layout", default="type1",
                         help="nominal model: built-in layout type1 | type2 (default type1)")
     parser.add_argument("--config", default="",
@@ -42,6 +44,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="orbit period assumed by the gravity-gradient candidate [s] (86164.1)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    parser.add_argument("--time-correlation", metavar="FILE", default="",
+                        help="packets: onboard -> contract time YAML (default: the packet directory's "
+                             "time_correlation.yaml, else identity)")
 
 
 def _load_npz(path: Path, sample_rate_hz: float) -> Any:
@@ -60,11 +65,11 @@ def _load_npz(path: Path, sample_rate_hz: float) -> Any:
     return prepare_input(data["t_s"], data["st_quat_xyzw"], data["voltages_v"], data["torque_cmd_n_m"], rate)
 
 
-def _load_bag(path: Path, sample_rate_hz: float) -> Any:
+def _load_bag(path: Path, sample_rate_hz: float, correlation: Any = None) -> Any:
     from taiji2_estimator_pkg.diagnosis import align_streams
     from taiji2_estimator_pkg.io.raw_bag import load_raw_bag
 
-    raw = load_raw_bag(path)
+    raw = load_raw_bag(path, correlation=correlation)
     st, grs1, grs2, commands = raw.star_tracker, raw.grs1, raw.grs2, raw.commands
     if st is None or grs1 is None or grs2 is None or commands is None:
         raise ValueError(f"{path}: a raw topic is missing")
@@ -110,7 +115,9 @@ def main(args: argparse.Namespace) -> int:
     if path.suffix == ".npz":
         inp = _load_npz(path, config.sample_rate_hz)
     else:
-        inp = _load_bag(path, config.sample_rate_hz)
+        from taiji2_estimator_pkg.io.raw_packets import time_correlation_from
+
+        inp = _load_bag(path, config.sample_rate_hz, time_correlation_from(args.time_correlation))
     rejected = sum(inp.rejected.values())
     progress(f"{inp.n} samples on the grid ({inp.duration_s:.0f} s), {rejected} rejected {inp.rejected or ''}")
     result = diagnose(inp, config, options, progress)

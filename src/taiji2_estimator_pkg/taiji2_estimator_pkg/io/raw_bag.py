@@ -21,6 +21,7 @@ from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -199,6 +200,8 @@ class RawExperiment:
         ``{topic: TopicReport}`` for every raw topic.
     custom_data : dict
         The bag's metadata custom data (provenance), possibly empty.
+    packets : taiji2_runtime.packets.report.PacketReport or None
+        Per-APID counts when the input was a CCSDS packet file or directory (``storage == "ccsds"``).
     """
 
     path: Path
@@ -209,6 +212,7 @@ class RawExperiment:
     commands: CommandData | None
     report: dict[str, TopicReport]
     custom_data: dict[str, str]
+    packets: Any = None
 
     def grs(self, grs_id: int) -> GrsData | None:
         """GRS data by id (1 or 2)."""
@@ -328,15 +332,21 @@ def _read_raw_topics(bag: Path) -> tuple[str, dict[str, str], dict[str, TypeChec
         raise RawBagError(exc.path, exc.problem) from exc
 
 
-def load_raw_bag(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPICS)) -> RawExperiment:
+def load_raw_bag(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPICS),
+                 correlation: Any = None) -> RawExperiment:
     """Load the raw topics of the experiment bag at ``path``.
 
     Parameters
     ----------
     path : str or pathlib.Path
-        Bag directory (with ``metadata.yaml``) or a single ``.mcap`` / ``.db3`` file.
+        Bag directory (with ``metadata.yaml``) or a single ``.mcap`` / ``.db3`` file; or a CCSDS
+        packet file or directory, recognised by content and loaded by
+        :func:`~taiji2_estimator_pkg.io.raw_packets.load_raw_packets`.
     required : iterable of str
         Raw topics that must be present with usable messages (default: all four of the contract).
+    correlation : taiji2_runtime.packets.time_correlation.TimeCorrelation, optional
+        Packets only: onboard -> contract time (default: the directory's ``time_correlation.yaml``,
+        else the identity).
 
     Returns
     -------
@@ -355,6 +365,12 @@ def load_raw_bag(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPICS
     unknown = [t for t in required if t not in RAW_TOPICS]
     if unknown:
         raise ValueError(f"not raw-contract topics: {', '.join(unknown)}")
+    from taiji2_runtime.packets.files import is_packet_path
+
+    if is_packet_path(bag):
+        from .raw_packets import load_raw_packets
+
+        return load_raw_packets(bag, required=required, correlation=correlation)
     storage, custom, checks, raw = _read_raw_topics(bag)
     reports = {topic: TopicReport(topic, msgtype) for topic, msgtype in RAW_TOPICS.items()}
     usable: dict[str, list[RawMessages]] = {}

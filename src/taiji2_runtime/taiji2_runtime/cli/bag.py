@@ -2,7 +2,9 @@
 
 ``taiji2 bag record [TOPIC ...] [-a] [-o DIR] [-s mcap|sqlite3] [--use-sim-time] [--max-duration S]``
 ``taiji2 bag play BAG [-r RATE | --fast] [--clock [HZ]] [-l] [--topics T ...] [--remap FROM:=TO ...]``
-``taiji2 bag info BAG [--json] [--full]``
+``taiji2 bag info BAG|PACKETS [--json] [--full]``
+``taiji2 bag export BAG --ccsds OUT [--telecommands] [--time-correlation FILE]``
+``taiji2 bag import PACKETS -o BAG [-s mcap|sqlite3] [--time-correlation FILE]``
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ _DRAIN_IDLE_S = 0.3
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    sub = parser.add_subparsers(dest="bag_verb", metavar="<record|play|info>")
+    sub = parser.add_subparsers(dest="bag_verb", metavar="<record|play|info|export|import>")
     sub.required = True
 
     rec = sub.add_parser("record", help="record topics of the live graph into a bag",
@@ -65,10 +67,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     play.add_argument("--ack-timeout", type=float, default=30.0, metavar="S",
                       help="at the end, wait up to S seconds for subscribers to acknowledge (default 30)")
 
-    info = sub.add_parser("info", help="summary of a bag: duration, topics, counts, rates, gaps, provenance")
-    info.add_argument("bag", help="bag directory (or .mcap / .db3 file)")
+    info = sub.add_parser("info", help="summary of a bag: duration, topics, counts, rates, gaps, provenance",
+                          description="Summary of a bag, or of a CCSDS packet file or directory (recognised by "
+                                      "content): counts and defects per APID.")
+    info.add_argument("bag", help="bag directory (or .mcap / .db3 file), or a CCSDS packet file or directory")
     info.add_argument("--json", action="store_true", help="print one JSON object")
     info.add_argument("--full", action="store_true", help="show long custom data values in full")
+    info.add_argument("--time-correlation", metavar="FILE", help="packets: onboard -> contract time YAML")
+
+    export = sub.add_parser("export", help="write a bag's raw topics as CCSDS space packets",
+                            description="Write the raw-data contract topics of a bag as one file of CCSDS space "
+                                        "packets (docs/interfaces.md): one APID per stream, in onboard-time order.")
+    export.add_argument("bag", help="bag directory (or .mcap / .db3 file)")
+    export.add_argument("--ccsds", required=True, metavar="OUT", help="packet file to write (must not exist)")
+    export.add_argument("--telecommands", action="store_true",
+                        help="also write each command as a torque PUS telecommand (APID 0x140)")
+    export.add_argument("--time-correlation", metavar="FILE", help="contract -> onboard time YAML (default identity)")
+
+    imp = sub.add_parser("import", help="write a contract bag from CCSDS space packets",
+                         description="Decode a CCSDS packet file or directory (defects counted per APID) and write "
+                                     "the raw-data contract bag.")
+    imp.add_argument("packets", help="packet file or directory")
+    imp.add_argument("-o", "--output", required=True, help="bag directory to create")
+    imp.add_argument("-s", "--storage", choices=("mcap", "sqlite3"), default="mcap", help="storage (default mcap)")
+    imp.add_argument("--time-correlation", metavar="FILE", help="onboard -> contract time YAML (default: the "
+                                                                "directory's time_correlation.yaml, else identity)")
 
 
 class _Stop:
@@ -208,9 +231,18 @@ def _play(args: argparse.Namespace) -> int:
     return 0
 
 
+def _correlation(args: argparse.Namespace) -> Any:
+    from taiji2_runtime.packets.time_correlation import load_time_correlation
+
+    return load_time_correlation(args.time_correlation) if args.time_correlation else None
+
+
 def _info(args: argparse.Namespace) -> int:
     from taiji2_runtime.bag.info import bag_info, format_info, info_json
+    from taiji2_runtime.packets.files import is_packet_path
 
+    if is_packet_path(args.bag):
+        return _packet_info(args)
     summary = bag_info(args.bag)
     if args.json:
         print(json.dumps(info_json(summary)))
@@ -219,5 +251,71 @@ def _info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _packet_info(args: argparse.Namespace) -> int:
+    from taiji2_runtime.packets.files import read_packets
+
+    decoded = read_packets(args.bag, _correlation(args))
+    streams = {name: {"apid": f"0x{d.stream.apid:03X}", "topic": d.stream.topic, "samples": len(d),
+                      "start_ns": int(d.stamp_ns[0]) if len(d) else None,
+                      "end_ns": int(d.stamp_ns[-1]) if len(d) else None}
+               for name, d in decoded.streams.items()}
+    if decoded.telecommands is not None:
+        streams["telecommands"] = {"apid": "0x140", "topic": "(torque telecommands)",
+                                   "samples": len(decoded.telecommands)}
+    if args.json:
+        print(json.dumps({"path": str(args.bag), "format": "ccsds", "time_correlation": decoded.correlation.as_dict(),
+                          "streams": streams, "packets": decoded.report.as_dict()}))
+        return 0
+    print(f"CCSDS packets: {args.bag}")
+    print(f"time correlation: contract = {decoded.correlation.offset_s!r} s + {decoded.correlation.rate!r} x onboard")
+    for name, info in streams.items():
+        span = ""
+        if info.get("start_ns") is not None:
+            span = f", {info['start_ns'] / 1e9:.6f} .. {info['end_ns'] / 1e9:.6f} s"
+        print(f"  {name} [APID {info['apid']}] -> {info['topic']}: {info['samples']} samples{span}")
+    print("\n".join(decoded.report.lines()))
+    defects = decoded.report.defects()
+    print("defects: " + (", ".join(f"{k} {v}" for k, v in defects.items()) if defects else "none"))
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from taiji2_runtime.packets.bag_io import read_bag_streams
+    from taiji2_runtime.packets.bulk_encode import encode_streams
+    from taiji2_runtime.packets.files import write_packets
+
+    started = time.perf_counter()
+    streams, left_out = read_bag_streams(args.bag)
+    octets = encode_streams(streams, _correlation(args), telecommands=args.telecommands)
+    write_packets(args.ccsds, octets)
+    total = sum(v[0].shape[0] for v in streams.values())
+    print(f"wrote {total} packets ({len(octets)} octets) to {args.ccsds} in {time.perf_counter() - started:.2f} s",
+          file=sys.stderr)
+    for topic, counts in left_out.items():
+        if counts:
+            print(f"  {topic}: not exported " + ", ".join(f"{k} {v}" for k, v in counts.items()), file=sys.stderr)
+    return 0
+
+
+def _import(args: argparse.Namespace) -> int:
+    from taiji2_runtime.packets.bag_io import write_bag
+    from taiji2_runtime.packets.files import read_packets
+
+    started = time.perf_counter()
+    decoded = read_packets(args.packets, _correlation(args))
+    written = write_bag(args.output, decoded, storage=args.storage,
+                        custom_data={"taiji2.packets.source": str(args.packets),
+                                     "taiji2.packets.time_correlation": json.dumps(decoded.correlation.as_dict()),
+                                     "taiji2.packets.report": json.dumps(decoded.report.as_dict())})
+    print(f"wrote {sum(written.values())} messages to {args.output} in {time.perf_counter() - started:.2f} s",
+          file=sys.stderr)
+    for topic, n in written.items():
+        print(f"  {topic}: {n}", file=sys.stderr)
+    for line in decoded.report.lines():
+        print(line, file=sys.stderr)
+    return 0
+
+
 def main(args: argparse.Namespace) -> int:
-    return {"record": _record, "play": _play, "info": _info}[args.bag_verb](args)
+    return {"record": _record, "play": _play, "info": _info, "export": _export,
+            "import": _import}[args.bag_verb](args)

@@ -1,0 +1,123 @@
+"""Sample by sample: one contract sample -> one telemetry packet, and back (pure functions on bytes).
+
+For a node that packetizes or depacketizes a live stream. Headers are spacepackets'
+(``SpacePacketHeader``), the packet error control is its CRC (fastcrc's CRC-16/IBM-3740, the
+CRC-16-CCITT that spacepackets uses for PUS packets), the time field :mod:`.cuc`. The bulk codecs
+(:mod:`.bulk_encode`, :mod:`.bulk_decode`) give byte-identical packets (a test checks it).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+from fastcrc import crc16
+from spacepackets.ccsds.spacepacket import PacketType, SequenceFlags, SpacePacketHeader
+
+from .cuc import CucError, cuc_pack, cuc_unpack_ns
+from .definition import (
+    CRC_OCTETS,
+    IDLE_APID,
+    PRIMARY_HEADER_OCTETS,
+    SECONDARY_HEADER_OCTETS,
+    STREAM_BY_APID,
+    StreamDefinition,
+)
+
+__all__ = ["SEQ_MODULO", "PacketError", "TelemetrySample", "decode_packet", "encode_packet", "packet_crc"]
+
+SEQ_MODULO = 1 << 14
+
+
+class PacketError(ValueError):
+    """A packet that cannot be decoded; ``kind`` names the defect (``truncated``, ``crc_error``,
+    ``unknown_apid``, ``idle``, ``wrong_length``, ``bad_time_field``, ``not_telemetry``)."""
+
+    def __init__(self, kind: str, detail: str) -> None:
+        self.kind = kind
+        super().__init__(f"{kind}: {detail}")
+
+
+@dataclass(frozen=True)
+class TelemetrySample:
+    """One decoded telemetry packet.
+
+    Attributes
+    ----------
+    stream : StreamDefinition
+    seq_count : int
+        14-bit sequence count.
+    onboard_ns : int
+        Onboard (CUC) time [ns since the onboard epoch].
+    values : numpy.ndarray
+        User-data fields (float64) in the order of ``stream.fields``.
+    """
+
+    stream: StreamDefinition
+    seq_count: int
+    onboard_ns: int
+    values: np.ndarray
+
+
+def packet_crc(octets: bytes) -> int:
+    """CRC-16-CCITT (poly 0x1021, init 0xFFFF) of ``octets``."""
+    return crc16.ibm_3740(bytes(octets))
+
+
+def encode_packet(stream: StreamDefinition, seq_count: int, onboard_ns: int, values: np.ndarray) -> bytes:
+    """The telemetry packet of one sample.
+
+    Parameters
+    ----------
+    stream : StreamDefinition
+        Which stream (APID and fields).
+    seq_count : int
+        The APID's sequence count (taken modulo 2**14).
+    onboard_ns : int
+        Onboard time [ns since the onboard epoch] (see :class:`.time_correlation.TimeCorrelation`).
+    values : array_like
+        ``len(stream.fields)`` values in the contract's units.
+    """
+    values = np.asarray(values, dtype=np.float64).reshape(-1)
+    if values.shape[0] != len(stream.fields):
+        raise ValueError(f"{stream.name}: {len(stream.fields)} values expected, got {values.shape[0]}")
+    header = SpacePacketHeader(PacketType.TM, stream.apid, seq_count % SEQ_MODULO, stream.data_length,
+                               sec_header_flag=True, seq_flags=SequenceFlags.UNSEGMENTED)
+    body = header.pack() + cuc_pack(int(onboard_ns)) + values.astype(">f8").tobytes()
+    return bytes(body) + struct.pack(">H", packet_crc(body))
+
+
+def decode_packet(packet: bytes) -> TelemetrySample:
+    """Decode one telemetry packet (exactly one packet's octets).
+
+    Raises
+    ------
+    PacketError
+        With ``kind`` naming the defect.
+    """
+    packet = bytes(packet)
+    if len(packet) < PRIMARY_HEADER_OCTETS:
+        raise PacketError("truncated", f"{len(packet)} octets, shorter than a primary header")
+    header = SpacePacketHeader.unpack(packet)
+    if header.packet_len > len(packet):
+        raise PacketError("truncated", f"APID 0x{header.apid:03X}: {len(packet)} of {header.packet_len} octets")
+    if header.apid == IDLE_APID:
+        raise PacketError("idle", "idle packet (APID 0x7FF)")
+    packet = packet[:header.packet_len]
+    if packet_crc(packet) != 0:
+        raise PacketError("crc_error", f"APID 0x{header.apid:03X} sequence count {header.seq_count}")
+    if header.packet_type != PacketType.TM:
+        raise PacketError("not_telemetry", f"telecommand APID 0x{header.apid:03X}")
+    stream = STREAM_BY_APID.get(header.apid)
+    if stream is None:
+        raise PacketError("unknown_apid", f"APID 0x{header.apid:03X}")
+    if header.packet_len != stream.packet_octets:
+        raise PacketError("wrong_length", f"{stream.name}: {header.packet_len} octets, {stream.packet_octets} defined")
+    start = PRIMARY_HEADER_OCTETS
+    try:
+        onboard_ns = cuc_unpack_ns(packet[start:start + SECONDARY_HEADER_OCTETS])
+    except CucError as exc:
+        raise PacketError("bad_time_field", str(exc)) from None
+    data = packet[start + SECONDARY_HEADER_OCTETS:len(packet) - CRC_OCTETS]
+    return TelemetrySample(stream, header.seq_count, onboard_ns, np.frombuffer(data, dtype=">f8").astype(np.float64))
