@@ -26,7 +26,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .frames import apply_matrix, cross, quat_from_rotvec, quat_multiply, quat_prefix_product
+from .frames import (
+    apply_matrix,
+    apply_matrix_rows,
+    cross,
+    cross_rows,
+    quat_from_rotvec,
+    quat_multiply,
+    quat_prefix_product,
+)
 
 __all__ = ["AttitudeSteps", "gyroscopic_torque_n_m", "propagate_attitude"]
 
@@ -34,6 +42,9 @@ __all__ = ["AttitudeSteps", "gyroscopic_torque_n_m", "propagate_attitude"]
 _RATE_RTOL = 8.0 * np.finfo(np.float64).eps  # converged when the iterate moves by rounding only
 _STALL_RTOL = 1e-13  # accepted if the iteration stops contracting at rounding level
 _MAX_PICARD_ITERATIONS = 40
+#: Blocks shorter than this are solved in (n, 3) layout (fewer numpy calls), longer ones
+#: component-first; both do the same floating-point operations (bitwise equal results).
+_FEW_STEPS = 64
 
 
 @dataclass(frozen=True)
@@ -68,6 +79,14 @@ def gyroscopic_torque_n_m(omega_rad_s: ArrayLike, inertia_kg_m2: ArrayLike) -> n
 def _solve_block(omega_start: np.ndarray, torque: np.ndarray, inertia: np.ndarray,
                  inertia_inv: np.ndarray, dt_s: float) -> tuple[np.ndarray, ...] | None:
     """Picard iteration over one block; None if it does not converge (the caller splits it)."""
+    if torque.shape[0] < _FEW_STEPS:
+        return _solve_block_vectors(omega_start, torque, inertia, inertia_inv, dt_s)
+    return _solve_block_rows(omega_start, torque, inertia, inertia_inv, dt_s)
+
+
+def _solve_block_vectors(omega_start: np.ndarray, torque: np.ndarray, inertia: np.ndarray,
+                         inertia_inv: np.ndarray, dt_s: float) -> tuple[np.ndarray, ...] | None:
+    """:func:`_solve_block` in (n, 3) layout: fewest numpy calls, for a streaming step."""
     count = torque.shape[0]
     stacked = np.empty((count + 1, 3))
     stacked[0] = omega_start
@@ -92,6 +111,53 @@ def _solve_block(omega_start: np.ndarray, torque: np.ndarray, inertia: np.ndarra
                 previous_change = change
             previous = omega[1:]
     return None
+
+
+def _solve_block_rows(omega_start: np.ndarray, torque: np.ndarray, inertia: np.ndarray,
+                      inertia_inv: np.ndarray, dt_s: float) -> tuple[np.ndarray, ...] | None:
+    """:func:`_solve_block` for many steps.
+
+    The iterates are component-first (3, n), so that every operation runs over contiguous rows;
+    each element sees the same operations in the same order as in (n, 3) layout (bitwise equal).
+    """
+    count = torque.shape[0]
+    torque_rows = np.ascontiguousarray(torque.T)
+    stacked = np.empty((3, count + 1))
+    stacked[:, 0] = omega_start
+    # buffers reused by every iteration (two for the rates: this iterate and the previous one)
+    omega, previous = np.empty((3, count + 1)), np.empty((3, count + 1))
+    omega_dot, omega_mid, moment, work = (np.empty((3, count)) for _ in range(4))
+    scratch = np.empty(count)
+    gyroscopic = np.zeros((3, count))
+    previous_change = np.inf
+    with np.errstate(over="ignore", invalid="ignore"):
+        for iteration in range(_MAX_PICARD_ITERATIONS):
+            np.subtract(torque_rows, gyroscopic, out=work)
+            apply_matrix_rows(inertia_inv, work, out=omega_dot, scratch=scratch)
+            np.multiply(dt_s, omega_dot, out=stacked[:, 1:])
+            np.cumsum(stacked, axis=1, out=omega)  # omega_{k+1} = omega_k + dt omega_dot_k
+            np.add(omega[:, :-1], omega[:, 1:], out=omega_mid)
+            omega_mid *= 0.5
+            apply_matrix_rows(inertia, omega_mid, out=moment, scratch=scratch)
+            cross_rows(omega_mid, moment, out=gyroscopic, scratch=scratch)
+            if iteration:
+                np.subtract(omega[:, 1:], previous[:, 1:], out=work)
+                change = max(float(work.max()), -float(work.min()))  # max |.| without |.|
+                scale = max(float(omega.max()), -float(omega.min()))
+                if change <= _RATE_RTOL * scale:
+                    return _rows_to_vectors(omega[:, 1:], omega_mid, omega_dot)
+                if not change < previous_change:
+                    # stalled at rounding level: converged; otherwise diverging: give up early
+                    return (_rows_to_vectors(omega[:, 1:], omega_mid, omega_dot) if change <= _STALL_RTOL * scale
+                            else None)
+                previous_change = change
+            omega, previous = previous, omega
+    return None
+
+
+def _rows_to_vectors(*rows: np.ndarray) -> tuple[np.ndarray, ...]:
+    # (n, 3) C-ordered, as before: consumers' reductions (e.g. means over sub-steps) sum in memory order
+    return tuple(np.ascontiguousarray(r.T) for r in rows)
 
 
 def _solve_rates(omega_start: np.ndarray, torque: np.ndarray, inertia: np.ndarray,

@@ -16,8 +16,10 @@ from numpy.typing import ArrayLike
 
 __all__ = [
     "apply_matrix",
+    "apply_matrix_rows",
     "crf_to_tmrf",
     "cross",
+    "cross_rows",
     "quat_conjugate",
     "quat_from_rotvec",
     "quat_multiply",
@@ -25,6 +27,11 @@ __all__ = [
     "quat_rotate",
     "rotvec_from_quat",
 ]
+
+
+#: Below this many vectors the per-call cost of numpy dominates: the broadcasting forms are used
+#: (bitwise the same results as the per-component passes).
+_FEW_VECTORS = 64
 
 
 def crf_to_tmrf(grs_id: int, alpha_rad: float) -> np.ndarray:
@@ -65,14 +72,40 @@ def apply_matrix(matrix: ArrayLike, vectors: ArrayLike) -> np.ndarray:
     -------
     numpy.ndarray
         (..., 3). Written out by components (no BLAS): the same rounding for any number of rows,
-        which keeps one-step and many-step results identical, and no thread start-up cost.
+        which keeps one-step and many-step results identical, and no thread start-up cost. Each
+        output component is one pass over the rows, ``(v_x M_i0 + v_y M_i1) + v_z M_i2``: 3-4x
+        faster for many rows than broadcasting over the length-3 axis, and bitwise equal to it.
     """
     m = np.asarray(matrix, dtype=np.float64)
     v = np.asarray(vectors, dtype=np.float64)
-    vx, vy, vz = v[..., 0:1], v[..., 1:2], v[..., 2:3]
-    if m.ndim == 2:
-        return vx * m[:, 0] + vy * m[:, 1] + vz * m[:, 2]
-    return vx * m[..., :, 0] + vy * m[..., :, 1] + vz * m[..., :, 2]
+    if v.size < _FEW_VECTORS * 3:  # a few vectors (a streaming step): fewer numpy calls
+        vx, vy, vz = v[..., 0:1], v[..., 1:2], v[..., 2:3]
+        return vx * m[..., :, 0] + vy * m[..., :, 1] + vz * m[..., :, 2]
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    out = np.empty(np.broadcast_shapes(v.shape, m.shape[:-1]))
+    for i in range(3):
+        out[..., i] = vx * m[..., i, 0] + vy * m[..., i, 1] + vz * m[..., i, 2]
+    return out
+
+
+def apply_matrix_rows(matrix: np.ndarray, rows: np.ndarray, out: np.ndarray | None = None,
+                      scratch: np.ndarray | None = None) -> np.ndarray:
+    """:func:`apply_matrix` on component-first vectors: ``rows`` (3, n) -> (3, n), bitwise equal.
+
+    ``matrix`` is (3, 3), or (n, 3, 3) with one matrix per column of ``rows``; ``out`` (3, n) and
+    ``scratch`` (n,), when given, receive the result and the products (no allocation).
+    """
+    x, y, z = rows[0], rows[1], rows[2]
+    if out is None:
+        out = np.empty((3, *np.broadcast_shapes(x.shape, matrix.shape[:-2])))
+    if scratch is None:
+        scratch = np.empty(out.shape[1:])
+    for i in range(3):
+        row = out[i]
+        np.multiply(x, matrix[..., i, 0], out=row)
+        row += np.multiply(y, matrix[..., i, 1], out=scratch)
+        row += np.multiply(z, matrix[..., i, 2], out=scratch)
+    return out
 
 
 def cross(a: ArrayLike, b: ArrayLike) -> np.ndarray:
@@ -89,6 +122,22 @@ def cross(a: ArrayLike, b: ArrayLike) -> np.ndarray:
     out[..., 0] = ay * bz - az * by
     out[..., 1] = az * bx - ax * bz
     out[..., 2] = ax * by - ay * bx
+    return out
+
+
+def cross_rows(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None,
+               scratch: np.ndarray | None = None) -> np.ndarray:
+    """:func:`cross` on component-first vectors: (3, n) x (3, n) -> (3, n), bitwise equal.
+
+    ``out`` (3, n) and ``scratch`` (n,), when given, receive the result and the products.
+    """
+    if out is None:
+        out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    if scratch is None:
+        scratch = np.empty(out.shape[1:])
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(a[j], b[k], out=out[i])
+        out[i] -= np.multiply(a[k], b[j], out=scratch)
     return out
 
 
@@ -118,14 +167,28 @@ def quat_multiply(q_a: ArrayLike, q_b: ArrayLike) -> np.ndarray:
     return out
 
 
-def _hamilton_product(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
-    """Hamilton product on component-first arrays (4, ...); ``out`` may not alias a or b."""
+def _hamilton_product(a: np.ndarray, b: np.ndarray, out: np.ndarray, scratch: np.ndarray | None = None) -> None:
+    """Hamilton product on component-first arrays (4, ...); ``out`` may not alias a or b.
+
+    The terms are added left to right as in :func:`quat_multiply` (bitwise equal); ``scratch``
+    (one row, shaped like ``out[0]``) receives each product.
+    """
     ax, ay, az, aw = a[0], a[1], a[2], a[3]
     bx, by, bz, bw = b[0], b[1], b[2], b[3]
-    out[0] = aw * bx + ax * bw + ay * bz - az * by
-    out[1] = aw * by - ax * bz + ay * bw + az * bx
-    out[2] = aw * bz + ax * by - ay * bx + az * bw
-    out[3] = aw * bw - ax * bx - ay * by - az * bz
+    t = np.empty(out.shape[1:]) if scratch is None else scratch
+    for row, terms in ((0, ((aw, bx, 1), (ax, bw, 1), (ay, bz, 1), (az, by, -1))),
+                       (1, ((aw, by, 1), (ax, bz, -1), (ay, bw, 1), (az, bx, 1))),
+                       (2, ((aw, bz, 1), (ax, by, 1), (ay, bx, -1), (az, bw, 1))),
+                       (3, ((aw, bw, 1), (ax, bx, -1), (ay, by, -1), (az, bz, -1)))):
+        o = out[row]
+        (p, q, _), *rest = terms
+        np.multiply(p, q, out=o)
+        for p, q, sign in rest:
+            np.multiply(p, q, out=t)
+            if sign > 0:
+                o += t
+            else:
+                o -= t
 
 
 def quat_conjugate(q: ArrayLike) -> np.ndarray:
@@ -222,13 +285,16 @@ def quat_prefix_product(q: ArrayLike) -> np.ndarray:
     numpy.ndarray
         (n, 4) running products.
     """
-    # component-first (4, n) copy: contiguous component rows make each pass cheap
+    # component-first (4, n) copy: contiguous component rows make each pass cheap; two buffers in
+    # turn, so a pass copies only the prefix it leaves unchanged
     scan = np.array(np.asarray(q, dtype=np.float64).T, order="C")
     combined = np.empty_like(scan)
     count = scan.shape[1]
+    scratch = np.empty(count)
     offset = 1
     while offset < count:
-        _hamilton_product(scan[:, :-offset], scan[:, offset:], combined[:, offset:])
-        scan[:, offset:] = combined[:, offset:]
+        combined[:, :offset] = scan[:, :offset]
+        _hamilton_product(scan[:, :-offset], scan[:, offset:], combined[:, offset:], scratch[offset:])
+        scan, combined = combined, scan
         offset *= 2
     return np.ascontiguousarray(scan.T)

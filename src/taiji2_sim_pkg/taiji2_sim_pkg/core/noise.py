@@ -150,6 +150,11 @@ class NoiseDraws:
     star_tracker_rad: np.ndarray
 
 
+#: Per-step shape of each white source's draws.
+_SOURCE_SHAPES = {"thruster_torque": (3,), "thruster_force": (3,), "lfs_translational": (2, 3),
+                  "lfs_rotational": (2, 3), "tm_environment": (2, 3), "grs_voltage": (2, 6), "star_tracker": (3,)}
+
+
 class NoiseStreams:
     """All noise sources of one run, drawn step-block by step-block.
 
@@ -189,10 +194,22 @@ class NoiseStreams:
         """Whether a source is switched on."""
         return self._enabled[source_name]
 
+    def draw_source(self, source_name: str, n: int) -> np.ndarray:
+        """The next n steps of one source (the field of :meth:`draw` of that name, shape (n, ...)).
+
+        Each source has its own generator, so drawing sources one by one, in any order and in any
+        blocking of the steps, gives bitwise the numbers of :meth:`draw`.
+        """
+        if source_name == "srp":
+            return self._srp(n)
+        return self._white(source_name, (n, *_SOURCE_SHAPES[source_name]))
+
     def _white(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         if not self._enabled[name]:
             return np.zeros(shape)
-        return self._std[name] * self._rngs[name].standard_normal(shape)
+        draws = self._rngs[name].standard_normal(shape)
+        draws *= self._std[name]  # in place: the same products as std * draws, no second array
+        return draws
 
     def _srp(self, n: int) -> np.ndarray:
         if not self._enabled["srp"]:

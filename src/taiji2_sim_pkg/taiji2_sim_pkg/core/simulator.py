@@ -38,6 +38,14 @@ from .noise import NoiseStreams
 from .star_tracker import star_tracker_covariance_rad2, star_tracker_measurement
 from .timing import actuation_weights, apply_actuation
 
+#: Steps per chunk of the readout computation (temporaries of a few 100 kB).
+_READOUT_CHUNK_STEPS = 4096
+#: The noise sources of the readouts (drawn chunk by chunk).
+_READOUT_SOURCES = ("lfs_translational", "lfs_rotational", "tm_environment", "grs_voltage", "star_tracker")
+#: Per-GRS fields of a block and their widths.
+_GRS_FIELDS = (("angular_true", 3), ("linear_true", 3), ("linear_maneuver", 3), ("angular_meas", 3),
+               ("linear_meas", 3), ("angular_sf", 3), ("linear_sf", 3), ("com_offset", 3), ("voltages", 6))
+
 __all__ = [
     "SimOutput",
     "SimSample",
@@ -328,9 +336,9 @@ class Simulator:
         step_numbers = self._step_index + np.arange(count + 1, dtype=np.float64)
         times = self._t0_s + step_numbers * self._dt_s
         t_start, t_end = times[:-1], times[1:]
-        noise = self._noise.draw(count)
+        noise = self._noise  # one generator per source: drawing them one by one is bitwise draw(count)
 
-        torque = self._actuate(command) + noise.thruster_torque_n_m
+        torque = self._actuate(command) + noise.draw_source("thruster_torque", count)
         inertia = config.spacecraft.inertia_kg_m2
         for effect in self._hooks:
             torque = effect.applied_torque_n_m(t_start, torque)
@@ -339,25 +347,33 @@ class Simulator:
         inertia_inv = self._inertia_inv if inertia is config.spacecraft.inertia_kg_m2 else None
         attitude = propagate_attitude(self._quat, self._omega, torque, inertia, self._dt_s, inertia_inv)
 
-        force = noise.thruster_force_n
+        force = noise.draw_source("thruster_force", count)
         if force_cmd_n is not None:
             force = force + _as_commands("force_cmd_n", force_cmd_n, count)
-        a_sc = force / config.spacecraft.mass_kg + noise.srp_m_s2
+        a_sc = force / config.spacecraft.mass_kg + noise.draw_source("srp", count)
         for effect in self._hooks:
             a_sc = effect.spacecraft_acceleration_m_s2(t_start, a_sc)
 
-        grs: dict[str, np.ndarray] = {}
-        for index, sensor in enumerate(config.grs.sensors):
-            readout = self._grs_block(index, sensor.grs_id, t_end, attitude.omega_dot_rad_s2,
-                                      attitude.omega_mid_rad_s, a_sc, noise)
-            for key, value in readout.items():
-                if key not in grs:
-                    grs[key] = np.empty((count, len(config.grs.sensors), value.shape[-1]))
-                grs[key][:, index] = value
-
-        st_quat = star_tracker_measurement(attitude.quat_xyzw, noise.star_tracker_rad)
-        for effect in self._hooks:
-            st_quat = effect.star_tracker_quat_xyzw(t_end, st_quat)
+        # Readouts, step by step independent: in chunks of steps, so that their temporaries stay
+        # small (in cache, reused from the heap rather than fresh pages) and the readout noise is
+        # drawn chunk by chunk; effects see the whole block at once (some filter over time).
+        sensors = config.grs.sensors
+        grs = {key: np.empty((count, len(sensors), width)) for key, width in _GRS_FIELDS}
+        st_quat = np.empty((count, 4))
+        chunk = max(count, 1) if self._hooks else _READOUT_CHUNK_STEPS
+        for start in range(0, count, chunk):
+            window = slice(start, min(start + chunk, count))
+            size = window.stop - start
+            readout_noise = {name: noise.draw_source(name, size) for name in _READOUT_SOURCES}
+            for index, sensor in enumerate(sensors):
+                readout = self._grs_block(index, sensor.grs_id, t_end[window], attitude.omega_dot_rad_s2[window],
+                                          attitude.omega_mid_rad_s[window], a_sc[window], readout_noise)
+                for key, value in readout.items():
+                    grs[key][window, index] = value
+            quat = star_tracker_measurement(attitude.quat_xyzw[window], readout_noise["star_tracker"])
+            for effect in self._hooks:
+                quat = effect.star_tracker_quat_xyzw(t_end[window], quat)
+            st_quat[window] = quat
 
         self._quat = attitude.quat_xyzw[-1].copy()
         self._omega = attitude.omega_rad_s[-1].copy()
@@ -401,8 +417,8 @@ class Simulator:
         return out
 
     def _grs_block(self, index: int, grs_id: int, t_end: np.ndarray, omega_dot: np.ndarray,
-                   omega_mid: np.ndarray, a_sc: np.ndarray, noise: Any) -> dict[str, np.ndarray]:
-        """Readouts of one GRS over a block (arrays with leading axis n)."""
+                   omega_mid: np.ndarray, a_sc: np.ndarray, noise: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Readouts of one GRS over a block (arrays with leading axis n; ``noise`` by source name)."""
         sensor = self._config.grs.sensors[index]
         count = t_end.shape[0]
         crf_to_tmrf_i = self._crf_to_tmrf[index]
@@ -414,14 +430,13 @@ class Simulator:
         angular_true = apply_matrix(crf_to_tmrf_i, omega_dot)
         linear_maneuver = apply_matrix(crf_to_tmrf_i, coupling)
         linear_true = apply_matrix(crf_to_tmrf_i, a_sc + coupling)
-        angular_meas = angular_true + noise.lfs_rotational_rad_s2[:, index]
-        linear_meas = (linear_true + noise.lfs_translational_m_s2[:, index]
-                       + noise.tm_environment_m_s2[:, index])
+        angular_meas = angular_true + noise["lfs_rotational"][:, index]
+        linear_meas = linear_true + noise["lfs_translational"][:, index] + noise["tm_environment"][:, index]
         for effect in self._hooks:
             angular_meas, linear_meas = effect.grs_accelerations(t_end, grs_id, angular_meas, linear_meas)
             angular_sf, linear_sf = effect.grs_scale_factors(t_end, grs_id, angular_sf, linear_sf)
         voltages = voltages_from_accelerations(angular_meas, linear_meas, angular_sf, linear_sf)
-        voltages = voltages + noise.grs_voltage_v[:, index]
+        voltages = voltages + noise["grs_voltage"][:, index]
         for effect in self._hooks:
             voltages = effect.grs_voltages_v(t_end, grs_id, voltages)
         return {
