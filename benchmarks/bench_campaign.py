@@ -14,7 +14,9 @@ start-up of the pool's processes and of the cluster is outside the wall time. Wi
 cancels. Printed per worker count, against the goals:
 
 * per-case compute ratio = sum over the same cases of the compute timed inside ``run_case``,
-  engine / pool (goal <= 1.1; the median of the per-case ratios is printed too);
+  engine / pool (goal <= 1.1; the median of the per-case ratios is printed too), as wall time and
+  as the CPU time of the process over each case (worker threads included; on a machine that other
+  jobs keep busy the CPU ratio is the steadier one);
 * throughput ratio = cases/s engine / cases/s pool (goal >= 0.95 with 1 and 2 workers, >= 0.9
   with 16);
 * parallel efficiency = cases/s with N / (N x cases/s with 1), for each (goal >= 0.8 with 16);
@@ -60,6 +62,7 @@ class Measured:
     wall_s: float = 0.0
     completed: int = 0
     compute_s: dict[str, float] = field(default_factory=dict)
+    cpu_s: dict[str, float] = field(default_factory=dict)
     stderr: str = ""
 
     @property
@@ -111,6 +114,7 @@ def run_pool(cases: list[dict[str, Any]], workers: int) -> Measured:
             if result["status"] != "ok":
                 raise RuntimeError(result["error"])
             measured.compute_s[result["case_hash"]] = result["compute_s"]
+            measured.cpu_s[result["case_hash"]] = result["cpu_s"]
             measured.completed += 1
         measured.wall_s = time.perf_counter() - started
     return measured
@@ -142,6 +146,7 @@ def run_engine(cases_spec: dict[str, Any], workers: int, label: str = "engine") 
         if result["status"] != "ok":
             raise RuntimeError(result["error"])
         measured.compute_s[result["case_hash"]] = result["compute_s"]
+        measured.cpu_s[result["case_hash"]] = result["cpu_s"]
 
     with tempfile.TemporaryDirectory() as tmp, _captured_fd2() as err:
         run = engine.run_campaign(spec, Path(tmp), workers=workers, progress=None, on_result=record)
@@ -163,8 +168,8 @@ def _dask_default_env():
         engine.WORKER_PRE_SPAWN_ENV, engine.WORKER_SETUP = saved
 
 
-def _sum(m: Measured, keys: list[str]) -> float:
-    return sum(m.compute_s[k] for k in keys)
+def _sum(m: Measured, keys: list[str], what: str = "compute_s") -> float:
+    return sum(getattr(m, what)[k] for k in keys)
 
 
 def _verdict(ok: bool) -> str:
@@ -177,7 +182,7 @@ def main() -> int:
     parser.add_argument("--workers", default="1,2", help="comma-separated worker counts (default 1,2)")
     parser.add_argument("--repeats", type=int, default=2, help="rounds, order alternating (default 2)")
     parser.add_argument("--duration-s", type=float, default=10800.0)
-    parser.add_argument("--ablation", choices=["dask-default-env"], action="append", default=[])
+    parser.add_argument("--ablation", choices=["dask-default-env", "no-profiler"], action="append", default=[])
     parser.add_argument("--dask-config", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
     counts = [int(w) for w in args.workers.split(",")]
@@ -204,17 +209,22 @@ def main() -> int:
                     m = run_pool(cases, n)
                 elif label == "engine":
                     m = run_engine(cases_spec, n)
+                elif label == "engine[no-profiler]":
+                    with dask.config.set({"distributed.worker.profile.enabled": False}):
+                        m = run_engine(cases_spec, n, label)
                 else:
                     with _dask_default_env():
                         m = run_engine(cases_spec, n, label)
                 results.setdefault((label, n), []).append(m)
                 print(f"  round {round_index + 1}, {n} worker(s), {label:24s}: {m.completed} cases in "
                       f"{m.wall_s:6.2f} s = {m.rate:6.3f} cases/s, mean case compute "
-                      f"{_sum(m, keys) / len(keys):.3f} s", flush=True)
+                      f"{_sum(m, keys) / len(keys):.3f} s wall, {_sum(m, keys, 'cpu_s') / len(keys):.3f} s CPU",
+                      flush=True)
 
     print(f"\nload average {os.getloadavg()[0]:.2f} at end")
     rate = {k: sum(m.completed for m in v) / sum(m.wall_s for m in v) for k, v in results.items()}
     compute = {k: sum(_sum(m, keys) for m in v) for k, v in results.items()}
+    cpu = {k: sum(_sum(m, keys, "cpu_s") for m in v) for k, v in results.items()}
     all_ok = True
     for n in counts:
         pool = ("pool", n)
@@ -226,9 +236,11 @@ def main() -> int:
                 for a, b in zip(results[this], results[pool], strict=True) for k in keys)
             throughput = rate[this] / rate[pool]
             goal = 0.9 if n >= 16 else 0.95
-            print(f"{n} worker(s), {label}: per-case compute {label}/pool {compute_ratio:.3f}x (median per case "
-                  f"{per_case:.3f}x; goal <= 1.1: {_verdict(compute_ratio <= 1.1)}); throughput {rate[this]:.3f} "
-                  f"/ {rate[pool]:.3f} cases/s = {throughput:.3f}x (goal >= {goal}: {_verdict(throughput >= goal)})")
+            cpu_ratio = cpu[this] / cpu[pool]
+            print(f"{n} worker(s), {label}: per-case compute {label}/pool {compute_ratio:.3f}x wall (median per "
+                  f"case {per_case:.3f}x), {cpu_ratio:.3f}x CPU (goal <= 1.1: {_verdict(compute_ratio <= 1.1)} wall, "
+                  f"{_verdict(cpu_ratio <= 1.1)} CPU); throughput {rate[this]:.3f} / {rate[pool]:.3f} cases/s = "
+                  f"{throughput:.3f}x (goal >= {goal}: {_verdict(throughput >= goal)})")
             if label == "engine":
                 all_ok &= compute_ratio <= 1.1 and throughput >= goal
         if n != 1 and counts[0] == 1:
