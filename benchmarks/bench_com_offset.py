@@ -65,10 +65,9 @@ def _report(name: str, out: Path) -> None:
                if g == s.group and p == s.parameter and rows["status"][i] == "ok"]
         nis_band = np.nanmean([rows["nis_band"][i] for i in sel]) if s.parameter.count(".d_") else float("nan")
         adjusted = np.mean([bool(rows["noise_adjusted"][i]) for i in sel]) if s.parameter.count(".d_") else 0.0
-        scale = 1e6 if s.unit == "m" else 100.0 / np.mean([rows["truth"][i] for i in sel])
-        unit = "um" if s.unit == "m" else "%"
-        print(f"{s.group[:34]:34s} {s.parameter:13s} n={s.n:3d}  err std {s.error_std * scale:8.3f} {unit:2s} "
-              f"sigma {s.mean_sigma * scale:8.3f}  std/sigma {s.std_over_sigma:5.2f} "
+        # the summary's units: % of truth for G, um for d
+        print(f"{s.group[:34]:34s} {s.parameter:13s} n={s.n:3d}  err std {s.error_std:8.3f} {s.unit:2s} "
+              f"sigma {s.mean_sigma:8.3f}  std/sigma {s.std_over_sigma:5.2f} "
               f"[{s.std_over_sigma_lo:4.2f},{s.std_over_sigma_hi:4.2f}]  mean/sigma {s.mean_error / s.mean_sigma:+5.2f}"
               f"  std/bound {s.std_over_crlb:5.2f} [{s.std_over_crlb_lo:4.2f},{s.std_over_crlb_hi:4.2f}]"
               + (f"  band NIS {nis_band:4.2f} adjusted {adjusted:4.0%}" if np.isfinite(nis_band) else ""))
