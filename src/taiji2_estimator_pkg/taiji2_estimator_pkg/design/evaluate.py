@@ -1,13 +1,13 @@
 """Evaluate a candidate maneuver: CRLB / requirement of the 12 parameters, range, thrust, attitude.
 
-The bound is :func:`taiji2_estimator_pkg.core.crlb.crlb` (the honest joint two-GRS model of the
-default estimators, noise budget of the layout) on the noise-free simulated response of the
-candidate. The fast path exploits stationarity: for a periodic maneuver the information grows
-linearly with the record length, so the covariance over T is the covariance over a window W of a
+The bound is :func:`taiji2_estimator_pkg.core.crlb.crlb`: its default, the full bound of G and d
+estimated jointly from every channel of both GRS and the star tracker (what the default estimators
+reach), noise budget of the layout, on the noise-free simulated response of the candidate. The
+fast path exploits stationarity: for a periodic maneuver the information grows linearly with the record length, so the covariance over T is the covariance over a window W of a
 whole number of periods times W / T. What this neglects is the end effect (diffuse initial
 attitude/rate, bias and trend nuisances), which makes the window bound *larger* by O(P / W); with
-W >= 1000 s it is 1-2 % at the paper's preset (tested against the full bound). Every reported
-number of a final design is the full bound.
+W >= 1000 s it is 1-2 % at the paper's preset (tested against the whole-duration bound). Every
+reported number of a final design is the whole-duration bound.
 
 Usage is taken from the noise-free simulation of the whole duration (``SimOutput`` truth):
 peak maneuver-induced linear acceleration per GRS and TMRF axis (as the simulator's range check),

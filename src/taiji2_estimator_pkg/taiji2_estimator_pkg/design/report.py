@@ -110,7 +110,7 @@ def write_report(out: Path, report: dict, plots: bool = True) -> None:
     c = report["constraints"]
     lines = [f"# Maneuver design: {report['layout']}, family {report['family']}", "",
              f"Objective: the largest CRLB / requirement over the 12 parameters (G 0.3 %, d 100 um, 1 sigma), "
-             f"honest joint two-GRS bound (core/crlb.py). Constraints: range margin "
+             f"full Cramer-Rao bound of G and d jointly from every channel (core/crlb.py). Constraints: range margin "
              f"{report['constraints']['range_margin']:.0%} of +-{report['constraints']['range_m_s2']:.1e} m/s^2, "
              f"thrust {c['min_thrust_n'] * 1e6:.3g}-{c['max_thrust_n'] * 1e6:.3g}"
              f" uN at lever arm {report['constraints']['lever_arm_m']:g} m, attitude <= "
@@ -131,7 +131,8 @@ def write_report(out: Path, report: dict, plots: bool = True) -> None:
               f"Shortest duration with every requirement met at 1 sigma: paper "
               f"{p['shortest_duration_all_met_s'] / 3600:.2f} h (1/sqrt(T) scaling), design "
               f"{report['shortest_duration_s'] / 3600:.2f} h"
-              f"{' (verified with the full bound)' if report.get('shortest_verified') else ''}.", "",
+              f"{' (verified on the whole-duration simulation and bound)' if report.get('shortest_verified') else ''}"
+              ".", "",
               "## Usage (peak over the duration)", "",
               "| | range fraction GRS1 x y z | GRS2 x y z | thrust X Y Z [uN] | attitude X Y Z [mrad] |",
               "|---|---|---|---|---|"]
