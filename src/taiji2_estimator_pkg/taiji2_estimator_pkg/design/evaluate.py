@@ -3,8 +3,9 @@
 The bound is :func:`taiji2_estimator_pkg.core.crlb.crlb`: its default, the full bound of G and d
 estimated jointly from every channel of both GRS and the star tracker (what the default estimators
 reach), noise budget of the layout, on the noise-free simulated response of the candidate. The
-fast path exploits stationarity: for a periodic maneuver the information grows linearly with the record length, so the covariance over T is the covariance over a window W of a
-whole number of periods times W / T. What this neglects is the end effect (diffuse initial
+fast path exploits stationarity: for a periodic maneuver the information grows linearly with the
+record length, so the covariance over T is the covariance over a window W of a whole number of
+periods times W / T. What this neglects is the end effect (diffuse initial
 attitude/rate, bias and trend nuisances), which makes the window bound *larger* by O(P / W); with
 W >= 1000 s it is 1-2 % at the paper's preset (tested against the whole-duration bound). Every
 reported number of a final design is the whole-duration bound.
