@@ -55,14 +55,15 @@ def test_workers_have_no_trim_threshold_and_the_callers_environment_is_kept(tmp_
 
         def probe(dask_worker):
             return (os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("OPENBLAS_NUM_THREADS"),
-                    getattr(dask_worker, "taiji2_allocator_restored", "missing"))
+                    getattr(dask_worker, "taiji2_allocator_restored", "missing"),
+                    getattr(dask_worker, "taiji2_blas_threads", "missing"))
 
         seen.append(get_client().run(probe))
 
     before = dict(os.environ)
     run = run_campaign(spec, tmp_path, workers=2, progress=None, on_result=inspect)
     assert run.completed == 2
-    assert sorted(seen[0].values()) == [(None, "1", False)] * 2  # nothing left to restore
+    assert sorted(seen[0].values()) == [(None, "1", False, 1)] * 2  # nothing left to restore; one BLAS thread
     assert dict(os.environ) == before
 
 

@@ -84,7 +84,12 @@ class CampaignWorkerSetup(WorkerPlugin):
 
     def setup(self, worker: Any) -> None:
         """Called by Dask in each worker process before it runs a task."""
+        from taiji2_runtime.threads import limit_blas_threads
+
         worker.taiji2_allocator_restored = restore_allocator_thresholds()
+        # the project's BLAS policy (docs/threads.md), also on a cluster whose workers did not start
+        # with one BLAS thread (Dask's LocalCluster defaults do; `dask worker` on a host does not)
+        worker.taiji2_blas_threads = limit_blas_threads()
 
     def teardown(self, worker: Any) -> None:
         """Called by Dask when the worker starts to close."""
