@@ -171,20 +171,31 @@ def test_each_node_killed_and_restarted(graph_context, tmp_path, reference):
             graph.kill_and_restart(victim)
             graph.wait_until_restarted(victim)
         graph.wait_for_end()
+        for victim in ESTIMATORS:  # each restarted estimator names its resume, from its restart on ...
+            resumed = [d for d in graph.named("resumed from checkpoint") if d.name == victim]
+            assert resumed, (victim, [d.message for d in graph.diagnostics if d.name == victim][-20:],
+                             graph.log_tails())
+            # ... and its data gap once data beyond its checkpoint arrived. The estimates may reach the end
+            # before that: an estimator that had published the end before its kill (a busy machine: the
+            # simulator and the estimators ran ahead of the test) takes up its data beyond the checkpoint
+            # from the restarted simulator's rerun, so the wait is bounded by simulated progress
+            graph.spin_until(lambda v=victim: [d for d in graph.named("resumed from checkpoint", "data gap")
+                                               if d.name == v], 60.0, f"{victim} to name its data gap",
+                             while_moving=True)
+        graph.wait_for_end()  # again: a restarted estimator may have published its restored (earlier) estimate
         gaps = _assert_within_sigma(graph, reference)
         samples = _samples(graph)
         for victim, (_, killed_at_s) in kills.items():
             lost_s = 0.0
-            if victim in ESTIMATORS:  # each restarted estimator names its resume and its data gap
-                resumed = [d for d in graph.named("resumed from checkpoint") if d.name == victim]
-                assert resumed, (victim, [d.message for d in graph.diagnostics if d.level > 0][:20])
-                lost_s = max(d.values.get("data_gap_s", 0.0) for d in resumed)
+            if victim in ESTIMATORS:
+                lost_s = max(d.values["data_gap_s"] for d in graph.named("resumed from checkpoint", "data gap")
+                             if d.name == victim)
             if victim == "spacecraft_sim":
                 # the rerun's stamps up to what the estimators had are refused as out of order, counted and
                 # named; the commander commands again from the restarted clock (the run reached its end)
                 # (when the estimators already had the whole run, the rerun is refused after wait_for_end)
                 graph.spin_until(lambda: graph.named("rejected input", "out_of_order_stamp"), 60.0,
-                                 "the estimators to name the rerun's repeated stamps")
+                                 "the estimators to name the rerun's repeated stamps", while_moving=True)
                 # (the commander's 'clock went back' line is in its log only once it flushes, at its stop)
             _report("SIGKILL + restart", victim, killed_at_s=killed_at_s, samples=samples, lost_s=lost_s,
                     max_gap_over_bound=max(gaps.values()))
@@ -198,8 +209,12 @@ def test_each_node_killed_and_restarted(graph_context, tmp_path, reference):
         # SIGKILL loses only the open journal, never a file the metadata listed)
         assert got == list(range(got[0], got[-1] + 1, 100_000_000)) and got[0] == 100_000_000, topic
         assert got[-1] >= listed[topic] >= safe_s * 1e9, (topic, got[-1] / 1e9, safe_s, killed_at_s)
-    second = bag_stamps(graph.bags[1])  # ... and the restarted one records on to the end
-    assert all(second[topic][-1] == round(graph.duration_s * 1e9) for topic in RAW_TOPICS), graph.root
+    # ... and the restarted one records on to the end of the run: the end of the first run where the simulator
+    # reached it before its kill (its rerun from t = 0 then follows, as far as it got before the graph was
+    # stopped: a few seconds of it on a busy machine), else the end of the rerun, which the estimates needed
+    second = bag_stamps(graph.bags[1])
+    for topic in RAW_TOPICS:
+        assert max(second[topic]) == round(graph.duration_s * 1e9), (topic, max(second[topic]) / 1e9, graph.root)
 
 
 WRONG_PEER = textwrap.dedent("""
