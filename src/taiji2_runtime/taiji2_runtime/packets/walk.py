@@ -3,7 +3,8 @@
 The walk follows each packet's data length field. Where a packet fails its CRC, its length field
 cannot be trusted either: the walk resynchronises at the nearest offset where a sound packet starts
 (a plausible primary header, version 0 and unsegmented, whose packet passes its CRC; inside a
-packet that happens by chance once in 65,536 plausible headers), and counts the damaged packets in
+packet that happens by chance once in 65,536 plausible headers, so the packet after it must be
+sound too), and counts the damaged packets in
 between: walked with the defined length of their APID (or their length field for other APIDs), each
 one a ``crc_error`` of the APID as read, and what is left unreadable one ``corrupt_header``. A
 packet that runs past the end of the stream is the truncated final packet. Idle packets (APID
@@ -74,16 +75,19 @@ def _sound(buf: bytes, pos: int) -> bool:
 
 
 def _resync(buf: bytes, pos: int) -> int:
-    """The next offset >= pos where a sound packet starts, or len(buf)."""
+    """The next offset >= pos where a sound packet starts that the end of the stream or another
+    sound packet follows (two CRCs: a false start inside data is then a 1 in 2**32 chance), or len(buf)."""
     n = len(buf)
     for q in range(pos, n - _MIN_OCTETS + 1):
         if (buf[q] & 0xE0) == 0 and (buf[q + 2] & 0xC0) == 0xC0 and _sound(buf, q):
-            return q
+            end = q + ((buf[q + 4] << 8) | buf[q + 5]) + 7
+            if end == n or _sound(buf, end):
+                return q
     return n
 
 
-def _count_damaged(buf: bytes, pos: int, stop: int, result: Walk) -> None:
-    """Count the damaged packets of ``buf[pos:stop]`` (no sound packet starts inside it)."""
+def _count_damaged(buf: bytes, pos: int, stop: int, result: Walk, found: list[tuple[int, int]]) -> None:
+    """Count the damaged packets of ``buf[pos:stop]``; sound ones met on the way go to ``found``."""
     n = len(buf)
     q = pos
     while q < stop:
@@ -91,7 +95,10 @@ def _count_damaged(buf: bytes, pos: int, stop: int, result: Walk) -> None:
             apid = ((buf[q] & 7) << 8) | buf[q + 1]
             size = _DEFINED.get(apid, ((buf[q + 4] << 8) | buf[q + 5]) + 7)
             if q + size <= stop:
-                result.crc_error[apid] += 1
+                if crc16.ibm_3740(buf[q:q + size]) == 0:  # sound, but what follows it is damaged
+                    found.append((q, q + size))
+                else:
+                    result.crc_error[apid] += 1
                 q += size
                 continue
             if stop == n:
@@ -128,7 +135,11 @@ def walk_packets(buf: bytes) -> Walk:
                     pos = end
                     continue
         nxt = _resync(buf, pos + 1)
-        _count_damaged(buf, pos, nxt, result)
+        found: list[tuple[int, int]] = []
+        _count_damaged(buf, pos, nxt, result, found)
+        for start, stop in found:
+            starts.append(start)
+            ends.append(stop)
         result.skipped_octets += nxt - pos
         pos = nxt
     result.starts = np.asarray(starts, dtype=np.int64)
