@@ -46,10 +46,10 @@ def test_doubled_force_noise_is_measured_and_followed(seed):
 def test_band_covariance_of_white_unit_noise_is_the_identity():
     # 2000 blocks of 100 white unit samples in 6 channels: C_band = I within 5 sqrt(2/2000) = 0.16
     rng = np.random.default_rng(5)
-    result = band_noise(rng.standard_normal((200_000, 6)))
+    result = band_noise(rng.standard_normal((200_000, 6)), 100)
     assert result is not None and not result.significant
     assert np.max(np.abs(np.linalg.eigvalsh(result.covariance) - 1.0)) < 0.16
     # the same noise at 1.5x amplitude in one channel (2.25x PSD) is significant
     noise = rng.standard_normal((200_000, 6))
     noise[:, 2] *= 1.5
-    assert band_noise(noise).significant
+    assert band_noise(noise, 100).significant

@@ -24,7 +24,7 @@ from .epoch_arrays import EpochArrays
 from .instrument import InstrumentModel, angular_differences, linear_sums
 from .joint_com_offset import solve_joint
 from .kalman import chi2_gate
-from .noise_level import BandNoise, band_noise, r_adjustment
+from .noise_level import BLOCK_S, BandNoise, band_noise, r_adjustment
 from .scale_factor import ScaleFactorEstimate
 from .twostage import TwoStageFilter, solve_information
 from .validation import InputValidator, ValidationOptions, validate_batch
@@ -381,7 +381,8 @@ class ComOffsetEstimator:
         g, _ = self._scale_factors(scale_factors)
         initial = copy.deepcopy(self.filter)
         whitened = self._accumulate(initial, epochs, omega, tau, g)
-        self.band_noise = None if whitened is None else band_noise(whitened)
+        block = max(1, round(BLOCK_S * self.instrument.sample_rate_hz))
+        self.band_noise = None if whitened is None else band_noise(whitened, block)
         current = self.band_noise
         for _ in range(_NOISE_ITERATIONS if self.options.adapt_noise else 0):
             if current is None or not current.significant:
@@ -395,13 +396,13 @@ class ComOffsetEstimator:
             initial = TwoStageFilter(self.model.state_space, self.model.n_columns, self.options.snap_tolerance)
             self.eiv_full = self.model.eiv_correction(initial.lambda_inv_ss)
             whitened = self._accumulate(initial, epochs, omega, tau, g)
-            current = None if whitened is None else band_noise(whitened)
+            current = None if whitened is None else band_noise(whitened, block)
         self.last_index = int(epochs.index[-1])
         self.t_last_s = float(epochs.t[-1])
         return self.estimate(scale_factors)
 
     def _accumulate(self, initial: TwoStageFilter, epochs: EpochArrays, omega: np.ndarray, tau: np.ndarray,
-                    g: np.ndarray, evaluate_last: bool = True) -> np.ndarray | None:
+                    g: np.ndarray) -> np.ndarray | None:
         """Accumulate the record from ``initial`` with the chi-square gate (a second pass without the
         flagged epochs); returns the whitened post-fit innovations of the accepted solution (NaN
         where not a regular epoch), or None when not evaluated."""
@@ -414,10 +415,10 @@ class ComOffsetEstimator:
             self.determined = False
             self._drive(epochs, omega, tau, gated)
             whitened = None
-            if not np.all(np.isfinite(g)) or (attempt == 1 and not evaluate_last):
+            if not np.all(np.isfinite(g)):
                 break
             beta, _, ok = self.solve(g)
-            if not ok or (self.gate is None and not evaluate_last):
+            if not ok:
                 break
             nis, whitened = self._evaluate(initial, epochs, omega, tau, gated, g, beta)
             if self.gate is None or attempt == 1:

@@ -140,19 +140,18 @@ def solve_joint(model: object, info_columns: np.ndarray, g_prior: np.ndarray, p_
     g_information, _, _ = solve_information(p_g, np.eye(n_g))
     g = np.array(g_prior, dtype=np.float64)
     beta = np.array(beta_start, dtype=np.float64)
-    covariance = np.full((n_g + beta.size,) * 2, np.nan)
     converged = False
     steps = 0
-    for steps in range(1, _MAX_STEPS + 1):  # noqa: B007 (steps is reported)
+    while steps < _MAX_STEPS and not converged:
+        steps += 1
         hessian, score, _ = joint_information(model, info_columns, g, beta, g_information)
         score[:n_g] += g_information @ (g - g_prior)
         step, covariance, _ = solve_information(hessian, -score)
         g = g + step[:n_g]
         beta = beta + step[n_g:]
         sigma = np.sqrt(np.maximum(np.diag(covariance), 0.0))
-        if np.all(np.abs(step) <= _STEP_TOLERANCE_SIGMA * np.where(sigma > 0.0, sigma, np.inf)):
-            converged = True
-            break
+        converged = bool(np.all(np.abs(step) <= _STEP_TOLERANCE_SIGMA * np.where(sigma > 0.0, sigma, np.inf)))
+    # the covariance at the solution (the last step's is at the point before it)
     hessian, _, _ = joint_information(model, info_columns, g, beta, g_information)
     _, covariance, _ = solve_information(hessian, np.zeros(hessian.shape[0]))
     return JointSolution(g, beta, 0.5 * (covariance + covariance.T), steps, converged)

@@ -32,10 +32,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BandNoise", "band_noise", "r_adjustment"]
+__all__ = ["BLOCK_S", "BandNoise", "band_noise", "r_adjustment"]
 
-#: samples per block mean (10 s at 10 Hz: the band below ~0.05 Hz, where d's information lies)
-BLOCK_SAMPLES = 100
+#: length of a block mean [s] (the band below ~0.05 Hz, where d's information lies)
+BLOCK_S = 10.0
 #: an adjustment needs a departure beyond this many standard errors of the band covariance ...
 SIGNIFICANCE = 5.0
 #: ... and beyond this fraction (smaller departures change sigma by < 5 %)
@@ -65,7 +65,7 @@ class BandNoise:
     significant: bool
 
 
-def band_noise(whitened: np.ndarray, block_samples: int = BLOCK_SAMPLES) -> BandNoise | None:
+def band_noise(whitened: np.ndarray, block_samples: int) -> BandNoise | None:
     """Band covariance of whitened innovations.
 
     Parameters
@@ -74,7 +74,7 @@ def band_noise(whitened: np.ndarray, block_samples: int = BLOCK_SAMPLES) -> Band
         (L, m) whitened post-fit innovations, one row per consecutive epoch (NaN rows: not a regular
         epoch; a block containing one is not used).
     block_samples : int
-        B.
+        B: :data:`BLOCK_S` times the sample rate (100 at 10 Hz).
 
     Returns
     -------
