@@ -123,8 +123,10 @@ def test_ros2_cli_sees_embedded_node_its_parameters_and_topics(ros):
         info = ros("ros2 node info --no-daemon /maneuver_commander && "
                    "ros2 topic info -v --no-daemon /taiji2/maneuver/command && "
                    "ros2 param get --no-daemon /maneuver_commander period_s && "
-                   "ros2 param set --no-daemon /maneuver_commander period_s 100.0 && "
-                   "ros2 param get --no-daemon /maneuver_commander period_s && "
+                   "ros2 param set --no-daemon /maneuver_commander lookahead_s 2.5 && "
+                   "ros2 param get --no-daemon /maneuver_commander lookahead_s && "
+                   "ros2 param set --no-daemon /maneuver_commander period_s 100.0; "
+                   "ros2 param set --no-daemon /maneuver_commander lookahead_s -1.0; "
                    "ros2 param dump --no-daemon /maneuver_commander", timeout=180)
     finally:
         status, err = _stop(embedded)
@@ -134,8 +136,11 @@ def test_ros2_cli_sees_embedded_node_its_parameters_and_topics(ros):
     assert "/taiji2/maneuver/command: geometry_msgs/msg/WrenchStamped" in out  # node info: its publisher
     assert "/maneuver_commander/get_parameters: rcl_interfaces/srv/GetParameters" in out
     assert "Node name: maneuver_commander" in out  # topic info -v: the endpoint belongs to the node
-    assert "Double value is: 250.0" in out and "Set parameter successful" in out and "Double value is: 100.0" in out
-    assert "period_s: 100.0" in out  # dump
+    assert "Double value is: 250.0" in out and "Set parameter successful" in out and "Double value is: 2.5" in out
+    # read-only (read at start) and a refused value: ros2 param set says why (issue 26 row 2)
+    assert "Setting parameter failed: Trying to set a read-only parameter: period_s." in info.stderr, info.stderr
+    assert "Setting parameter failed: lookahead_s: -1.0 is outside [0.0, 3600.0] [s]" in info.stderr, info.stderr
+    assert "period_s: 250.0" in out and "lookahead_s: 2.5" in out  # dump
     assert _rmw_warnings(listed.stderr + info.stderr) == []
     assert status == 0, err
 
@@ -147,15 +152,20 @@ def test_embedded_tools_see_rclpy_node_and_its_parameters(ros):
         listed = ros(f"for i in $(seq 30); do {taiji2} node list | grep -qx /maneuver_commander && break; done; "
                      f"{taiji2} node list", env={"TAIJI2_RUNTIME": "cyclonedds"}, timeout=180)
         params = ros(f"{taiji2} param get /maneuver_commander period_s && "
-                     f"{taiji2} param set /maneuver_commander period_s 100.0 && "
-                     f"{taiji2} param get /maneuver_commander period_s", env={"TAIJI2_RUNTIME": "cyclonedds"},
-                     timeout=120)
+                     f"{taiji2} param set /maneuver_commander lookahead_s 2.5 && "
+                     f"{taiji2} param get /maneuver_commander lookahead_s && "
+                     f"({taiji2} param set /maneuver_commander period_s 100.0 || "
+                     f"{taiji2} param set /maneuver_commander lookahead_s -1.0 || true)",
+                     env={"TAIJI2_RUNTIME": "cyclonedds"}, timeout=120)
     finally:
         status, err = _stop(real)
     assert "/maneuver_commander" in listed.stdout.splitlines(), listed.stderr
     assert params.returncode == 0, params.stderr
     assert params.stdout.splitlines() == ["Double value is: 250.0", "Set parameter successful",
-                                          "Double value is: 100.0"]
+                                          "Double value is: 2.5"]
+    # rclpy's own refusal of a read-only parameter, then the node's check with its start-up message
+    assert "Trying to set a read-only parameter: period_s." in params.stderr, params.stderr
+    assert "lookahead_s: -1.0 is outside [0.0, 3600.0] [s]" in params.stderr, params.stderr
     assert status == 0, err
     assert _rmw_warnings(err) == [], err  # the rclpy node had nothing to say about our endpoints
 

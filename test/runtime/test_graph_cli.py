@@ -32,12 +32,16 @@ def test_node_list_and_param_get_set_reach_an_embedded_node():
         got = _taiji2("param", "get", NODE, "publish_rate_hz")
         assert got.stdout.strip() == "Double value is: 20.0", got.stderr
 
-        assert _taiji2("param", "set", NODE, "period_s", "100.0").stdout.strip() == "Set parameter successful"
-        assert _taiji2("param", "get", NODE, "period_s").stdout.strip() == "Double value is: 100.0"
-        refused = _taiji2("param", "set", NODE, "period_s", "fast")
-        errors = [line for line in refused.stderr.splitlines() if line.startswith("error:")]
-        assert refused.returncode == 1 and len(errors) == 1 and "period_s" in errors[0], refused.stderr
-        assert _taiji2("param", "get", NODE, "period_s").stdout.strip() == "Double value is: 100.0"
+        # lookahead_s can change at run time (checked, applied); period_s is read at start: read-only
+        assert _taiji2("param", "set", NODE, "lookahead_s", "2.5").stdout.strip() == "Set parameter successful"
+        assert _taiji2("param", "get", NODE, "lookahead_s").stdout.strip() == "Double value is: 2.5"
+        for name, value, why in (("lookahead_s", "fast", "lookahead_s"), ("lookahead_s", "-1.0", "outside"),
+                                 ("period_s", "100.0", "Trying to set a read-only parameter: period_s.")):
+            refused = _taiji2("param", "set", NODE, name, value)
+            errors = [line for line in refused.stderr.splitlines() if line.startswith("error:")]
+            assert refused.returncode == 1 and len(errors) == 1 and why in errors[0], refused.stderr
+        assert _taiji2("param", "get", NODE, "lookahead_s").stdout.strip() == "Double value is: 2.5"
+        assert _taiji2("param", "get", NODE, "period_s").stdout.strip() != "Double value is: 100.0"
 
         absent = _taiji2("param", "get", "/no_such_node", "x", "--timeout", "0.5")
         assert absent.returncode == 2 and "/no_such_node" in absent.stderr

@@ -35,7 +35,6 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("com_offset_estimator", **node_kwargs)
         self.paper = self.p["method"] == "paper"
-        self.paper_period_s = self.p["paper_batch_period_s"]
         # the body rate enters only omega x (omega x d), ~1e-14 m s^-2 at calibration rates; without it
         # a replayed bag reproduces the live estimate exactly, independent of message timing
         self.use_rate = self.p["use_rate_estimate"]
@@ -139,7 +138,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
             for stream, reason in report.rejections:
                 self.get_logger().warn(f"rejected {stream} at t = {epoch.t_ns / 1e9:.1f} s: {reason}",
                                        throttle_duration_sec=10.0)
-        period_s = self.paper_period_s if self.paper else self.p["publish_period_s"]
+        period_s = self.p["paper_batch_period_s"] if self.paper else self.p["publish_period_s"]
         period_ns = int(period_s * 1e9)
         if self.last_publish_ns < 0 or epoch.t_ns // period_ns > self.last_publish_ns // period_ns:
             self.publish_estimate(epoch.t_ns)

@@ -16,6 +16,8 @@ from taiji2_estimator_pkg.checkpoint import load_checkpoint, save_checkpoint
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.parameters import DEFAULTS, NODE_DEFAULTS
 from taiji2_estimator_pkg.epochs import EpochAssembler
+from taiji2_estimator_pkg.nodes.runtime_parameters import RUNTIME_CHECKS, accept_runtime_parameters
+from taiji2_runtime import node_parameters
 from taiji2_runtime.ros import messages, rclpy
 
 STAR_TRACKER_TOPIC = "/taiji2/star_tracker"
@@ -33,15 +35,6 @@ PAUSE_REPORTED_AFTER_S = 2.0
 RESUME_WARN_REPORTS = 10
 
 
-def descriptor(description: str, *, low: float | None = None, high: float | None = None) -> Any:
-    """ParameterDescriptor with an optional floating-point range."""
-    rcl = messages.rcl_interfaces
-    d = rcl.ParameterDescriptor(description=description)
-    if low is not None:
-        d.floating_point_range = [rcl.FloatingPointRange(from_value=low, to_value=high, step=0.0)]
-    return d
-
-
 #: Core keys the nodes fix: both GRS are always estimated jointly (the two topics of the contract).
 _FIXED = {"grs_ids": [1, 2]}
 
@@ -57,8 +50,9 @@ def declare_parameters(node: Any, node_name: str) -> dict[str, Any]:
     for key, default in table.items():
         if key in _FIXED:
             continue
-        values[key] = node.declare_parameter(key, default, descriptor(
-            f"see config/estimators.yaml, {node_name}.{key} (default {default!r})")).value
+        values[key] = node.declare_parameter(key, default, node_parameters.descriptor(
+            f"see config/estimators.yaml, {node_name}.{key} (default {default!r})",
+            read_only=key not in RUNTIME_CHECKS)).value
     if values["method"] not in METHODS:
         raise ValueError(f"method: {values['method']!r} is not one of {', '.join(METHODS)}")
     return values
@@ -175,6 +169,7 @@ class EstimatorNode(rclpy.node.Node):
     def __init__(self, node_name: str, **node_kwargs: Any) -> None:
         super().__init__(node_name, **node_kwargs)
         self.p = declare_parameters(self, node_name)
+        accept_runtime_parameters(self, self.p)
         self.instrument = instrument_from(self.p)
         self.assembler = EpochAssembler(self.streams(), self.p["max_stream_silence_s"])
         self.node_rejections = RejectionCounts()

@@ -151,16 +151,26 @@ class ParameterMixin:
             return _result(True)
         descriptor = self._descriptors[parameter.name]
         if descriptor.read_only:
-            return _result(False, f"parameter '{parameter.name}' is read-only")
+            return _result(False, f"Trying to set a read-only parameter: {parameter.name}.")  # rclpy's words
         declared = self._declared_types[parameter.name]
         if not descriptor.dynamic_typing and declared != Parameter.Type.NOT_SET and not declared.check(parameter.value):
             return _result(False, str(InvalidParameterTypeException(parameter, declared.name)))
-        try:
-            self._check_and_notify([parameter], self._descriptors)
-        except InvalidParameterValueException as exc:
-            return _result(False, str(exc))
+        violation = _range_violation(descriptor, parameter.value)
+        if violation:
+            return _result(False, str(InvalidParameterValueException(parameter.name, parameter.value, violation)))
+        refusal = self._callbacks_refusal([parameter])
+        if refusal is not None:
+            return refusal  # as rclpy: the callback's result, its reason as the callback wrote it
         self._parameters[parameter.name] = parameter
         return _result(True)
+
+    def _callbacks_refusal(self, parameters: list[Parameter]) -> Any:
+        """The first unsuccessful SetParametersResult of the set-parameters callbacks (None: all accept)."""
+        for callback in self._set_callbacks:
+            result = callback(parameters)
+            if result is not None and not result.successful:
+                return result
+        return None
 
     def _check_and_notify(self, parameters: list[Parameter], descriptors: dict[str, Any]) -> None:
         for p in parameters:
@@ -169,9 +179,8 @@ class ParameterMixin:
                 violation = _range_violation(descriptor, p.value)
                 if violation:
                     raise InvalidParameterValueException(p.name, p.value, violation)
-        for callback in self._set_callbacks:
-            result = callback(parameters)
-            if result is not None and not result.successful:
-                names = ", ".join(p.name for p in parameters)
-                values = ", ".join(repr(p.value) for p in parameters)
-                raise InvalidParameterValueException(names, values, result.reason)
+        result = self._callbacks_refusal(parameters)
+        if result is not None:
+            names = ", ".join(p.name for p in parameters)
+            values = ", ".join(repr(p.value) for p in parameters)
+            raise InvalidParameterValueException(names, values, result.reason)

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from taiji2_runtime import node_parameters
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.config import builtin_layouts, load_config
@@ -27,11 +28,16 @@ _NS = 1e-9
 
 
 def _descriptor(description: str, *, low: float | None = None, high: float | None = None) -> Any:
+    """A read-only parameter (read once at start; ``ros2 param set`` is refused)."""
     rcl = messages.rcl_interfaces
-    descriptor = rcl.ParameterDescriptor(description=description)
+    descriptor = rcl.ParameterDescriptor(description=f"{description} [read-only: read at start]", read_only=True)
     if low is not None:
         descriptor.floating_point_range = [rcl.FloatingPointRange(from_value=low, to_value=high, step=0.0)]
     return descriptor
+
+
+#: the commander's one parameter that ``ros2 param set`` may change while it runs (from the next tick on)
+LOOKAHEAD_CHECK = node_parameters.within("lookahead_s", 0.0, 3600.0, "s")
 
 
 class ManeuverCommander(rclpy.node.Node):
@@ -61,9 +67,12 @@ class ManeuverCommander(rclpy.node.Node):
                 "duration_s", float(nominal.duration_s), _descriptor("maneuver duration [s]")).value,
         }
         self._lookahead_ns = round(1e9 * self.declare_parameter(
-            "lookahead_s", 0.0, _descriptor("publish time-tagged commands this far ahead of the clock [s] "
-                                            "(lets an accelerated simulation run without a round trip per "
-                                            "step)", low=0.0, high=3600.0)).value)
+            "lookahead_s", 0.0, node_parameters.descriptor(
+                "publish time-tagged commands this far ahead of the clock, 0-3600 [s] (lets an accelerated "
+                "simulation run without a round trip per step)")).value)
+        #: the largest lookahead in effect so far: commands up to it ahead may have gone out [ns]
+        self._max_lookahead_ns = self._lookahead_ns
+        node_parameters.RuntimeParameters(self, {"lookahead_s": LOOKAHEAD_CHECK}, self._set_lookahead)
         rate_hz = self.declare_parameter(
             "publish_rate_hz", 10.0, _descriptor("command publishing rate [Hz]", low=1.0, high=1000.0)).value
         self._frame_id = self.declare_parameter("frame_id", "crf", _descriptor("header.frame_id")).value
@@ -108,18 +117,26 @@ class ManeuverCommander(rclpy.node.Node):
             self._on_tick()
             self._first_command_timer.cancel()
 
+    def _set_lookahead(self, name: str, value: float) -> None:
+        """``ros2 param set lookahead_s``: commands go that far ahead from the next tick on (never a stamp twice)."""
+        self._lookahead_ns = round(1e9 * value)
+        self._max_lookahead_ns = max(self._max_lookahead_ns, self._lookahead_ns)
+        self.get_logger().info(f"lookahead_s set to {value} s")
+
     def _on_tick(self) -> None:
         now_ns = self.get_clock().now().nanoseconds
         if self._origin_ns is None:
             self._origin_ns = now_ns
-        if self._next_stamp_ns is None or self._lookahead_ns == 0:
+        if self._next_stamp_ns is None:
             self._next_stamp_ns = now_ns
-        elif now_ns < self._next_stamp_ns - self._lookahead_ns - 2 * self._period_ns:
+        elif now_ns < self._next_stamp_ns - self._max_lookahead_ns - 2 * self._period_ns:
             # the clock went back (a restarted simulation, a replay from its start): what was commanded
             # beyond it is stale for the new run, so command again from the clock
             self.get_logger().info(f"clock went back from {(self._next_stamp_ns - self._lookahead_ns) / 1e9:.1f} s "
                                    f"to {now_ns / 1e9:.1f} s: commanding again from there")
             self._next_stamp_ns = now_ns
+        elif self._lookahead_ns == 0 and self._next_stamp_ns - self._period_ns <= now_ns:
+            self._next_stamp_ns = now_ns  # no lookahead: one command per tick, stamped now
         # every tick up to now + lookahead, in stamp order (time-tagged commands)
         while self._next_stamp_ns <= now_ns + self._lookahead_ns:
             self._publish_command(self._next_stamp_ns)

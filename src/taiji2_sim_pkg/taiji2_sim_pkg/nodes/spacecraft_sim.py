@@ -53,7 +53,8 @@ _PAUSE_REPORTED_AFTER_S = 2.0
 
 def _descriptor(description: str, **ranges: tuple[float, float]) -> Any:
     rcl = messages.rcl_interfaces
-    descriptor = rcl.ParameterDescriptor(description=description)
+    # every parameter of the simulator is read once at start: read-only (ros2 param set is refused)
+    descriptor = rcl.ParameterDescriptor(description=f"{description} [read-only: read at start]", read_only=True)
     if "float_range" in ranges:
         low, high = ranges["float_range"]
         descriptor.floating_point_range = [rcl.FloatingPointRange(from_value=low, to_value=high, step=0.0)]

@@ -1,0 +1,118 @@
+"""Parameters mean what they say (issue 26 row 2), on whichever runtime runs the tests (embedded, or rclpy
+in the rclpy tier): start-up-only parameters are read-only, runtime ones take effect and are refused with the
+start-up message."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+
+from taiji2_estimator_pkg.nodes.com_offset_estimator import ComOffsetEstimatorNode
+from taiji2_estimator_pkg.nodes.runtime_parameters import RUNTIME_CHECKS
+from taiji2_estimator_pkg.nodes.scale_factor_estimator import ScaleFactorEstimatorNode
+from taiji2_runtime.ros import messages, rclpy
+from taiji2_sim_pkg.core.config import load_config
+from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
+from taiji2_sim_pkg.nodes.maneuver_commander import ManeuverCommander
+from taiji2_sim_pkg.nodes.spacecraft_sim import SpacecraftSim
+
+from support import REPO, spin_until
+
+READ_ONLY = "Trying to set a read-only parameter: {}."
+N = 600  # 60 s at 10 Hz
+
+
+def _set(node, name, value):
+    return node.set_parameters([rclpy.parameter.Parameter(name, value=value)])[0]
+
+
+def _start_error(make, name, value) -> str:
+    """The error a node started with ``name:=value`` ends with (a node of its own name: the first one runs)."""
+    with pytest.raises(ValueError) as refused:
+        make(["--ros-args", "-r", f"__node:=started_with_{name}", "-p", f"{name}:={value}"])
+    return str(refused.value)
+
+
+@pytest.mark.parametrize("node_class", [ScaleFactorEstimatorNode, ComOffsetEstimatorNode])
+def test_estimator_parameters_are_read_only_except_the_runtime_ones(context, node_class):
+    node = node_class(context=context)
+    for name in ("method", "layout", "gate_probability", "max_stream_silence_s", "checkpoint_file"):
+        result = _set(node, name, "bogus" if name == "method" else node.get_parameter(name).value)
+        assert not result.successful and result.reason == READ_ONLY.format(name), (name, result.reason)
+        assert node.describe_parameter(name).read_only
+    assert node.get_parameter("method").value == "gls" and node.p["method"] == "gls"
+    for name in RUNTIME_CHECKS:
+        if not node.has_parameter(name):
+            continue
+        assert not node.describe_parameter(name).read_only
+        assert _set(node, name, 0.25).successful and node.p[name] == 0.25  # in effect: what the node reads
+        # a bad value: the same words as when the node is started with it
+        start_error = _start_error(lambda a: node_class(context=context, cli_args=a), name, -1.0)
+        result = _set(node, name, -1.0)
+        assert not result.successful and result.reason == start_error, (result.reason, start_error)
+        assert node.p[name] == 0.25 and node.get_parameter(name).value == 0.25
+
+
+def test_a_publish_period_set_at_run_time_takes_effect(context, executor):
+    config = load_config("type1", overrides={"maneuver.duration_s": N / 10})
+    out = simulate_batch(config, 26, maneuver_torque_commands(config, N))
+    node = ScaleFactorEstimatorNode(context=context)
+    feeder = rclpy.node.Node("feeder", context=context)
+    t = messages.taiji2_msgs
+    qos = rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL)
+    star = feeder.create_publisher(t.StarTracker, "/taiji2/star_tracker", qos)
+    grs = {g: feeder.create_publisher(t.GrsVoltages, f"/taiji2/grs{g}/voltages", qos) for g in (1, 2)}
+    stamps: list[float] = []
+    feeder.create_subscription(t.ScaleFactorEstimate, "/taiji2/estimates/grs1/scale_factors",
+                               lambda m: stamps.append(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9), qos)
+    for n in (node, feeder):
+        executor.add_node(n)
+    assert spin_until(executor, lambda: star.get_subscription_count() >= 1 and grs[2].get_subscription_count() >= 1)
+    assert _set(node, "publish_period_s", 20.0).successful  # `ros2 param set ... publish_period_s 20.0`
+    for k in range(N):
+        sec, nanosec = divmod(round(out.t_s[k] * 1e9), 10**9)
+        m = t.StarTracker()
+        m.header.stamp.sec, m.header.stamp.nanosec, m.header.frame_id = sec, nanosec, "crf"
+        m.attitude.x, m.attitude.y, m.attitude.z, m.attitude.w = (float(v) for v in out.st_quat_xyzw[k])
+        star.publish(m)
+        for g in (1, 2):
+            v = t.GrsVoltages(grs_id=g)
+            v.header.stamp.sec, v.header.stamp.nanosec, v.header.frame_id = sec, nanosec, f"tmrf{g}"
+            v.vx1, v.vx2, v.vy1, v.vy2, v.vz1, v.vz2 = (float(x) for x in out.voltages_v[k][g - 1])
+            grs[g].publish(v)
+        if k % 100 == 0:
+            executor.spin_once(timeout_sec=0.0)
+    last = float(out.t_s[N - 1])
+    assert spin_until(executor, lambda: stamps and abs(stamps[-1] - last) < 1e-6, timeout_s=60)
+    # one estimate per 20 s of data (the first epoch, 20, 40 s) and the end of data, not one per second
+    assert [round(s, 1) for s in stamps] == [round(float(out.t_s[0]), 1), 20.0, 40.0, round(last, 1)], stamps
+
+
+def test_commander_and_simulator_parameters_are_read_only_but_the_lookahead(context):
+    commander = ManeuverCommander(context=context)
+    for name in ("amplitude_n_m", "period_s", "preset", "publish_rate_hz"):
+        result = _set(commander, name, commander.get_parameter(name).value)
+        assert not result.successful and result.reason == READ_ONLY.format(name), (name, result.reason)
+    assert _set(commander, "lookahead_s", 2.0).successful and commander._lookahead_ns == 2_000_000_000
+    start_error = _start_error(lambda a: ManeuverCommander(context=context, cli_args=a), "lookahead_s", -1.0)
+    result = _set(commander, "lookahead_s", -1.0)
+    assert not result.successful and result.reason == start_error == "lookahead_s: -1.0 is outside [0.0, 3600.0] [s]"
+    sim = SpacecraftSim(context=context, cli_args=["--ros-args", "-p", "duration_s:=1.0"])
+    for name in ("seed", "clock_mode", "duration_s", "layout"):
+        result = _set(sim, name, sim.get_parameter(name).value)
+        assert not result.successful and result.reason == READ_ONLY.format(name), (name, result.reason)
+
+
+def test_config_files_say_which_parameters_can_change_at_run_time():
+    # every documented key is marked: `[runtime]` exactly for the runtime parameters, the header says the rest
+    # are read-only
+    estimators = (REPO / "src" / "taiji2_estimator_pkg" / "config" / "estimators.yaml").read_text()
+    commander = (REPO / "src" / "taiji2_sim_pkg" / "config" / "maneuver_commander.yaml").read_text()
+    simulator = (REPO / "src" / "taiji2_sim_pkg" / "config" / "spacecraft_sim.yaml").read_text()
+    for text, runtime in ((estimators, set(RUNTIME_CHECKS)), (commander, {"lookahead_s"}), (simulator, set())):
+        assert "read-only" in text.split("\n\n")[0]
+        marked = {line.split(":")[0].strip() for line in text.splitlines() if "[runtime]" in line
+                  and not line.lstrip().startswith("#")}
+        documented = {key for key in runtime if f" {key}:" in text}
+        assert marked == documented, (marked, documented)
+        yaml.safe_load(text)
