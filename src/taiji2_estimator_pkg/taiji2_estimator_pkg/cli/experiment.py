@@ -38,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="", help="directory for node logs and results.json (default: a temp dir)")
     parser.add_argument("--json", action="store_true", help="print the results as one JSON object")
     parser.add_argument("--timeout-s", type=float, default=1800.0, help="wall-clock limit [s]")
+    from taiji2_estimator_pkg.cli.experiment_link import add_link_arguments
+
+    add_link_arguments(parser)  # --link MODEL, --link-seed, --link-fault (docs/link.md)
 
 
 class _Monitor:
@@ -119,6 +122,10 @@ def main(args: argparse.Namespace) -> int:
     from taiji2_runtime.threads import limit_blas_threads
 
     limit_blas_threads()  # before any BLAS work: one BLAS thread (docs/threads.md)
+    if getattr(args, "link", ""):
+        from taiji2_estimator_pkg.cli.experiment_link import run_link_experiment
+
+        return run_link_experiment(args)  # onboard and ground joined by a space link (docs/link.md)
     import tempfile
 
     from taiji2_estimator_pkg.report import EstimateTable, format_table

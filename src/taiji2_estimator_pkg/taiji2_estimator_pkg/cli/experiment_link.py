@@ -1,0 +1,287 @@
+"""``taiji2 experiment --link MODEL``: the experiment through the space link (docs/link.md).
+
+Onboard (namespace ``/onboard``): spacecraft_sim on the onboard bus, the onboard command source, the
+telemetry packetizer. Between: space_link. Ground (``/ground``): the ground receiver, both
+estimators (on the contract topics the receiver publishes) and, with ``--record``, the recorder of
+the ground side. Reports per stream what the link did (generated, delivered, lost, duplicated,
+reordered, overwritten, latency), what the ground received, the link faults, and for each
+requirement the onboard (data) time and the ground time at which the ground first met it.
+Imports only the standard library at module level (a verb's rule).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+_NS = 1_000_000_000
+SCALE_FACTOR_NAMES = ("G_Pphi", "G_Ptheta", "G_Ppsi")
+AXES = ("x", "y", "z")
+
+
+def add_link_arguments(parser: argparse.ArgumentParser) -> None:
+    """The link options of ``taiji2 experiment``."""
+    parser.add_argument("--link", default="",
+                        help="run onboard and ground apart, joined by a space link: a preset of "
+                             "taiji2_sim_pkg/config/link.yaml (ideal | deep_space) or a link YAML file (docs/link.md)")
+    parser.add_argument("--link-seed", type=int, default=None, help="seed of the link's loss draws (default: --seed)")
+    parser.add_argument("--link-fault", action="append", default=[],
+                        help="a link fault: missed_contact:K (pass K missed entirely) or lost_uplink:K "
+                             "(repeatable; K = 0 is the first pass)")
+
+
+class LinkMonitor:
+    """Estimate history, truth, the ground receiver's reception log, the link report, diagnostics."""
+
+    def __init__(self, node: Any) -> None:
+        from taiji2_runtime.ros import messages, rclpy
+
+        t = messages.taiji2_msgs
+        keep_all = rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL,
+                                        reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
+        latched = rclpy.qos.QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL,
+                                       reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
+        self.latest: dict[str, Any] = {}
+        self.history: dict[str, list[tuple[int, list[float], list[float]]]] = {}
+        for grs in (1, 2):
+            for kind, cls in (("scale_factors", t.ScaleFactorEstimate), ("com_offset", t.ComOffsetEstimate)):
+                self._watch(node, cls, f"/taiji2/estimates/grs{grs}/{kind}", keep_all, record=True)
+                self._watch(node, cls, f"/taiji2/sim/grs{grs}/{kind}", keep_all)
+        self._watch(node, t.ComOffsetEstimate, "/taiji2/estimates/com_offset_difference", keep_all)
+        self.reception: list[dict[str, Any]] = []
+        self.link_report: dict[str, Any] | None = None
+        self.diagnostics: dict[str, Any] = {}
+        self.faults_seen: dict[str, str] = {}
+        s = messages.std_msgs.String
+        node.create_subscription(s, "/ground/link/reception", lambda m: self.reception.append(json.loads(m.data)),
+                                 keep_all)
+        node.create_subscription(s, "/taiji2/sim/link_report", self._on_report, latched)
+        node.create_subscription(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", self._on_diag, 100)
+
+    def _watch(self, node: Any, cls: type, topic: str, qos: Any, record: bool = False) -> None:
+        def on(msg: Any) -> None:
+            self.latest[topic] = msg
+            if record:
+                value = list(msg.scale_factors) if hasattr(msg, "scale_factors") else [msg.offset.x, msg.offset.y,
+                                                                                        msg.offset.z]
+                sigma = [max(float(msg.covariance[4 * k]), 0.0) ** 0.5 for k in range(3)]
+                self.history.setdefault(topic, []).append(
+                    (msg.header.stamp.sec * _NS + msg.header.stamp.nanosec, value, sigma))
+
+        node.create_subscription(cls, topic, on, qos)
+
+    def _on_report(self, msg: Any) -> None:
+        self.link_report = json.loads(msg.data)
+
+    def _on_diag(self, msg: Any) -> None:
+        for status in msg.status:
+            self.diagnostics[status.name] = status
+            if status.name == "space_link" and status.level > 0:
+                for part in status.message.split("; "):
+                    name, _, text = part.partition(": ")
+                    self.faults_seen[name] = text
+
+    def stamp_ns(self, topic: str) -> int:
+        msg = self.latest.get(topic)
+        return -1 if msg is None else msg.header.stamp.sec * _NS + msg.header.stamp.nanosec
+
+
+def requirement_times(history: dict[str, list[tuple[int, list[float], list[float]]]],
+                      reception: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """For each requirement (G to 0.3 % and d to 100 um, 1 sigma, per GRS and axis): the data (onboard) time
+    of the first estimate that met it and the ground time at which the ground had released the data
+    through that time (None: not met)."""
+    from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
+
+    streams = {"scale_factors": ("star_tracker", "grs1", "grs2"), "com_offset": ("grs1", "grs2")}
+    out = []
+    for grs in (1, 2):
+        for kind, names in (("scale_factors", SCALE_FACTOR_NAMES), ("com_offset", AXES)):
+            topic = f"/taiji2/estimates/grs{grs}/{kind}"
+            for k, name in enumerate(names):
+                data_ns = None
+                for stamp, value, sigma in history.get(topic, []):
+                    bound = (SCALE_FACTOR_REQUIREMENT_REL * abs(value[k]) if kind == "scale_factors"
+                             else COM_OFFSET_REQUIREMENT_M)
+                    if sigma[k] == sigma[k] and sigma[k] <= bound:
+                        data_ns = stamp
+                        break
+                ground_s = None
+                if data_ns is not None:
+                    for rec in reception:
+                        through = [rec["released_through_s"].get(s) for s in streams[kind]]
+                        if rec.get("end_of_data") or all(x is not None and x * _NS >= data_ns - 1000 for x in through):
+                            ground_s = rec["ground_time_s"]
+                            break
+                out.append({"grs": grs, "parameter": name if kind == "scale_factors" else f"d_{name}",
+                            "requirement": "0.3 %" if kind == "scale_factors" else "100 um",
+                            "onboard_time_s": None if data_ns is None else data_ns / _NS, "ground_time_s": ground_s})
+    return out
+
+
+def pass_of(ground_time_s: float | None, model: Any) -> int | None:
+    """Index of the pass a ground time falls in (or the last one before it)."""
+    if ground_time_s is None or model.contacts.always:
+        return None
+    last = None
+    for k, start, _ in model.contacts.passes():
+        if start > ground_time_s:
+            break
+        last = k
+    return last
+
+
+def format_link_report(link: dict[str, Any]) -> str:
+    """The per-stream and operations part of the report, as text."""
+    lines = [f"link {link['model']['name']} (seed {link['seed']}): light time {link['model']['light_time_s']:g} s, "
+             f"contacts {json.dumps(link['model']['contacts'])}, downlink {link['model']['downlink_rate_bps']} bit/s"]
+    lines.append(f"  {'stream':16} {'generated':>9} {'delivered':>9} {'lost':>6} {'dupl.':>6} {'reord.':>7} "
+                 f"{'overwr.':>7} {'latency med/max [s]':>20} {'missing (ground)':>16}")
+    for name, s in link["streams"].items():
+        ground = link["ground"].get(name, {})
+        med = "-" if s["latency_median_s"] is None else f"{s['latency_median_s']:.1f}"
+        mx = "-" if s["latency_max_s"] is None else f"{s['latency_max_s']:.1f}"
+        lines.append(f"  {name:16} {s['generated']:9d} {s['delivered']:9d} {s['lost']:6d} {s['duplicated']:6d} "
+                     f"{s['reordered']:7d} {s['overwritten']:7d} {med + ' / ' + mx:>20} "
+                     f"{ground.get('missing', 0):16d}")
+    lines.append("Requirements (1-sigma), first met on the ground: data (onboard) time -> ground time")
+    for r in link["requirements"]:
+        if r["onboard_time_s"] is None:
+            lines.append(f"  GRS{r['grs']} {r['parameter']:9} ({r['requirement']}): not met")
+            continue
+        where = "" if r["pass"] is None else f" (pass {r['pass']})"
+        lines.append(f"  GRS{r['grs']} {r['parameter']:9} ({r['requirement']}): onboard {r['onboard_time_s']:10.1f} s"
+                     f" -> ground {r['ground_time_s']:10.1f} s{where}")
+    faults = link["faults"]
+    lines.append("Link faults: " + ("; ".join(f"{k}: {v}" for k, v in faults.items()) if faults else "none"))
+    return "\n".join(lines)
+
+
+def run_link_experiment(args: argparse.Namespace) -> int:
+    """``taiji2 experiment --link``: the whole run (see the module docstring)."""
+    import tempfile
+
+    from taiji2_estimator_pkg.cli.experiment import _spawn, _stop
+    from taiji2_estimator_pkg.report import EstimateTable, format_table
+    from taiji2_runtime.ros import rclpy
+    from taiji2_sim_pkg.core.link import LinkError, load_link_model
+
+    try:
+        model = load_link_model(args.link)
+        missed, lost_up = [], []
+        for fault in args.link_fault:
+            kind, _, k = fault.partition(":")
+            if kind not in ("missed_contact", "lost_uplink") or not k.isdigit():
+                raise LinkError(f"--link-fault {fault!r}: expected missed_contact:K or lost_uplink:K")
+            (missed if kind == "missed_contact" else lost_up).append(int(k))
+        model = model.with_faults(missed, lost_up)
+    except LinkError as exc:
+        print(f"error: taiji2 experiment: {exc}", file=sys.stderr)
+        return 2
+    link_seed = args.seed if args.link_seed is None else args.link_seed
+    out = Path(args.out or tempfile.mkdtemp(prefix="taiji2-experiment-"))
+    out.mkdir(parents=True, exist_ok=True)
+    duration_s = 10800.0 if args.duration_s is None else float(args.duration_s)
+    overrides = [f"maneuver.duration_s={duration_s}", *args.override]
+    source = ["-p", f"config_file:={args.config}"] if args.config else ["-p", f"layout:={args.layout}"]
+    onboard_remaps = []
+    for topic in ("/taiji2/star_tracker", "/taiji2/grs1/voltages", "/taiji2/grs2/voltages", "/taiji2/maneuver/command"):
+        onboard_remaps += ["-r", f"{topic}:=/onboard{topic}"]
+    est_args = ["--ros-args", "-r", "__ns:=/ground", "-p", f"layout:={args.config or args.layout}",
+                "-p", f"method:={args.method}"]
+    commander_maneuver = [f"maneuver_file:={Path(args.maneuver).resolve()}"] if args.maneuver else []
+    commands = {
+        "scale_factor_estimator": ["run", "taiji2_estimator_pkg", "scale_factor_estimator", *est_args],
+        "com_offset_estimator": ["run", "taiji2_estimator_pkg", "com_offset_estimator", *est_args],
+        "ground_receiver": ["run", "taiji2_sim_pkg", "ground_receiver", "--ros-args", "-r", "__ns:=/ground"],
+        "space_link": ["run", "taiji2_sim_pkg", "space_link", "--ros-args", "-p", f"model:={args.link}",
+                       "-p", f"seed:={link_seed}", "-p", f"missed_contacts:={[*missed, -1]}",
+                       "-p", f"lost_uplinks:={[*lost_up, -1]}"],
+        "telemetry_packetizer": ["run", "taiji2_sim_pkg", "telemetry_packetizer", "--ros-args", "-r",
+                                 "__ns:=/onboard", "-p", f"end_of_data_s:={duration_s}"],
+        "maneuver_commander": ["run", "taiji2_sim_pkg", "maneuver_commander", "--ros-args", "-r", "__ns:=/onboard",
+                               *onboard_remaps, "-p", f"preset:={args.layout}", "-p", "use_sim_time:=true",
+                               "-p", "lookahead_s:=2.0", *[a for p in commander_maneuver for a in ("-p", p)]],
+        "spacecraft_sim": ["run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard",
+                           *onboard_remaps, *source, "-p", f"seed:={args.seed}", "-p", f"duration_s:={duration_s}",
+                           "-p", "wait_for_subscribers:=[1, 1, 1]", "-p", "config_overrides:=" + json.dumps(overrides)],
+    }
+    if args.record:
+        commands["recorder"] = ["bag", "record", "-a", "-x", "^/(onboard|taiji2/sim)/", "-o", args.record]
+    rclpy.init(args=["taiji2-experiment"])
+    node = rclpy.create_node("taiji2_experiment_link")
+    monitor = LinkMonitor(node)
+    procs: dict[str, Any] = {}
+    started = time.monotonic()
+    status = 0
+    try:
+        for name, argv in commands.items():
+            procs[name] = _spawn(argv, out / f"{name}.log")
+        print(f"experiment: {args.config or args.layout}, {duration_s:g} s simulated, seed {args.seed}, "
+              f"link {model.name} (seed {link_seed}); node logs in {out}", file=sys.stderr)
+        last_progress = 0.0
+        sf_topics = [f"/taiji2/estimates/grs{g}/scale_factors" for g in (1, 2)]
+        d_topics = [f"/taiji2/estimates/grs{g}/com_offset" for g in (1, 2)]
+        while True:
+            rclpy.spin_once(node, timeout_sec=0.1)
+            failed = [n for n, p in procs.items()
+                      if p.poll() is not None and (p.returncode != 0 or n != "spacecraft_sim")]
+            if failed:
+                raise RuntimeError(f"node {failed[0]} exited with status {procs[failed[0]].returncode}; "
+                                   f"see {out / (failed[0] + '.log')}")
+            final = monitor.reception[-1] if monitor.reception and monitor.reception[-1]["end_of_data"] else None
+            if final is not None and monitor.link_report is not None:
+                through = final["released_through_s"]
+                sf_target = max((v for k, v in through.items() if k != "executed_torque" and v is not None), default=0)
+                d_target = max((through.get(k) or 0 for k in ("grs1", "grs2")), default=0)
+                if (all(monitor.stamp_ns(t) >= sf_target * _NS - 1000 for t in sf_topics)
+                        and all(monitor.stamp_ns(t) >= min(d_target, sf_target) * _NS - 1000 for t in d_topics)):
+                    break
+            if time.monotonic() - started > args.timeout_s:
+                raise TimeoutError(f"experiment did not finish within {args.timeout_s:g} s wall time")
+            if time.monotonic() - last_progress > 5.0:
+                last_progress = time.monotonic()
+                rec = monitor.reception[-1] if monitor.reception else None
+                onboard = max((v for v in (rec or {}).get("released_through_s", {}).values() if v), default=0.0)
+                ground = (rec or {}).get("ground_time_s") or 0.0
+                print(f"  ground released data through {onboard:.0f} s of {duration_s:g} s (ground time "
+                      f"{ground:.0f} s; {time.monotonic() - started:.0f} s wall)", file=sys.stderr)
+        elapsed = time.monotonic() - started
+        table = EstimateTable.from_messages(monitor.latest, layout=args.layout)
+        results = table.to_dict()
+        requirements = requirement_times(monitor.history, monitor.reception)
+        for r in requirements:
+            r["pass"] = pass_of(r["ground_time_s"], model)
+        report = monitor.link_report
+        faults = dict(report.get("faults", {}))
+        faults.update({k: v for k, v in monitor.faults_seen.items() if k not in faults})
+        link = {"model": report["model"], "seed": link_seed, "streams": report["streams"],
+                "ground": final["counts"], "requirements": requirements, "faults": faults,
+                "contacts_used": report["contacts_used"], "never_transmitted": report["never_transmitted"],
+                "memory_peak_octets": report["memory_peak_octets"], "uplink": report["uplink"],
+                "final_ground_time_s": final["ground_time_s"], "wall_s": elapsed,
+                "speed_x_real_time": duration_s / elapsed}
+        results["link"] = link
+        (out / "results.json").write_text(json.dumps(results, indent=2))
+        if args.json:
+            print(json.dumps(results))
+        else:
+            print(format_table(table))
+            print(format_link_report(link))
+            print(f"\n{duration_s:g} s simulated in {elapsed:.1f} s wall ({duration_s / elapsed:.0f}x real time); "
+                  f"results in {out / 'results.json'}")
+    except (RuntimeError, TimeoutError) as exc:
+        print(f"error: taiji2 experiment: {exc}", file=sys.stderr)
+        status = 1
+    finally:
+        incomplete = _stop(procs, max(60.0, args.timeout_s - (time.monotonic() - started)))
+        node.destroy_node()
+        rclpy.try_shutdown()
+    if incomplete is not None:
+        print(f"error: taiji2 experiment: {incomplete}; see {out / 'recorder.log'}", file=sys.stderr)
+        status = 1
+    return status

@@ -1,0 +1,129 @@
+"""ground_receiver (ground): the packets the ground station received -> the raw-data contract topics, in order.
+
+Subscribes to ``/ground/link/tm`` and runs :class:`taiji2_runtime.packets.reception.GroundReception`:
+per APID in sequence-count order, each count once (duplicates dropped), real-time data held until
+the played-back data before them have arrived, gaps declared lost once the spacecraft's
+transmitted-through time has passed them. Publishes what it releases on the contract topics
+(``/taiji2/star_tracker``, ``/taiji2/grs{1,2}/voltages``, ``/taiji2/maneuver/command`` from the
+executed-torque packets; header stamp = onboard time through the time correlation) in stamp order,
+so the estimators, the recorder and ``taiji2 calibrate`` get in-order data with gaps. After each
+burst it publishes on ``/ground/link/reception`` (JSON) the ground time, the onboard time through
+which each stream has been released and the counts (received, released, duplicate, out_of_order,
+missing, held), and the same on ``/diagnostics`` (WARN naming missing samples). Parameters:
+``config/ground_receiver.yaml``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from taiji2_runtime.entry import run_node
+from taiji2_runtime.packets.reception import GroundReception, ReleasedSample
+from taiji2_runtime.packets.time_correlation import TimeCorrelation
+from taiji2_runtime.ros import messages, rclpy
+from taiji2_sim_pkg.nodes import link_topics as lt
+
+_NS = 1_000_000_000
+_FRAMES = {"grs1": "tmrf1", "grs2": "tmrf2"}
+
+
+def _descriptor(description: str) -> Any:
+    return messages.rcl_interfaces.ParameterDescriptor(description=description)
+
+
+class GroundReceiver(rclpy.node.Node):
+    """Depacketizes the received telemetry in order (module docstring)."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("ground_receiver", **node_kwargs)
+        offset_s = self.declare_parameter("time_correlation_offset_s", 0.0, _descriptor(
+            "contract time of the onboard clock's zero [s] (contract = offset + rate x onboard)")).value
+        rate = self.declare_parameter("time_correlation_rate", 1.0, _descriptor("onboard clock rate")).value
+        self._correlation = TimeCorrelation(float(offset_s), float(rate))
+        self._rx = GroundReception()
+        qos = lt.reliable_all()
+        t, g = messages.taiji2_msgs, messages.geometry_msgs
+        topics = dict(zip(("star_tracker", "grs1", "grs2", "executed_torque"), lt.CONTRACT_TOPICS, strict=True))
+        types = {"star_tracker": t.StarTracker, "grs1": t.GrsVoltages, "grs2": t.GrsVoltages,
+                 "executed_torque": g.WrenchStamped}
+        self._pubs = {name: self.create_publisher(types[name], topic, qos) for name, topic in topics.items()}
+        self._reception_pub = self.create_publisher(messages.std_msgs.String, lt.RECEPTION_TOPIC, qos)
+        self._diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(t.SpacePackets, lt.GROUND_TM, self._on_burst, qos)
+        self._ground_ns = -1
+        self._ended = False
+        self._samples_out = 0
+
+    def _on_burst(self, msg: Any) -> None:
+        try:
+            packets = lt.split(msg)
+        except ValueError as exc:
+            self.get_logger().error(f"burst refused: {exc}", throttle_duration_sec=10.0)
+            return
+        for packet, receive_ns in zip(packets, msg.times_ns, strict=True):
+            self._rx.offer(packet, int(receive_ns))
+        if msg.times_ns:
+            self._ground_ns = max(self._ground_ns, int(msg.times_ns[-1]))
+        through = int(msg.transmitted_through_ns)
+        released = self._rx.finish() if msg.end_of_data else self._rx.release(through if through >= 0 else None)
+        for r in released:
+            self._publish_sample(r)
+        self._ended = bool(msg.end_of_data)
+        self._publish_reception()
+
+    def _publish_sample(self, r: ReleasedSample) -> None:
+        s = r.sample
+        name = s.stream.name
+        v = [float(x) for x in s.values]
+        t_ns = int(self._correlation.to_contract_ns(np.array([s.onboard_ns], dtype=np.int64))[0])
+        m = messages
+        if name == "star_tracker":
+            msg = m.taiji2_msgs.StarTracker()
+            msg.header.frame_id = "crf"
+            msg.attitude.x, msg.attitude.y, msg.attitude.z, msg.attitude.w = v[:4]
+            msg.attitude_covariance = v[4:13]
+        elif name in _FRAMES:
+            msg = m.taiji2_msgs.GrsVoltages(grs_id=int(name[-1]))
+            msg.header.frame_id = _FRAMES[name]
+            msg.vx1, msg.vx2, msg.vy1, msg.vy2, msg.vz1, msg.vz2 = v
+        else:
+            msg = m.geometry_msgs.WrenchStamped()
+            msg.header.frame_id = "crf"
+            w = msg.wrench
+            w.torque.x, w.torque.y, w.torque.z, w.force.x, w.force.y, w.force.z = v
+        lt.set_stamp(msg.header, int(t_ns))
+        self._pubs[name].publish(msg)
+        self._samples_out += 1
+
+    def reception(self) -> dict[str, Any]:
+        """Ground time, the onboard time released through per stream, the counts, end of data."""
+        return {"ground_time_s": self._ground_ns / _NS if self._ground_ns >= 0 else None,
+                "released_through_s": {k: (v / _NS if v >= 0 else None)
+                                       for k, v in self._rx.released_through_ns().items()},
+                "counts": self._rx.counts(), "rejected": dict(self._rx.rejected), "end_of_data": self._ended}
+
+    def _publish_reception(self) -> None:
+        state = self.reception()
+        self._reception_pub.publish(messages.std_msgs.String(data=json.dumps(state)))
+        d = messages.diagnostic_msgs
+        missing = {k: c["missing"] for k, c in state["counts"].items() if c["missing"]}
+        status = d.DiagnosticStatus(name="ground_receiver", hardware_id="taiji2_ground")
+        status.level = d.DiagnosticStatus.WARN if missing else d.DiagnosticStatus.OK
+        status.message = ("samples lost on the link: " + ", ".join(f"{k} {n}" for k, n in missing.items())
+                          if missing else "nominal")
+        status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in state.items()]
+        array = d.DiagnosticArray(status=[status])
+        lt.set_stamp(array.header, max(self._ground_ns, 0))
+        self._diag_pub.publish(array)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(GroundReceiver, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
