@@ -81,6 +81,48 @@ def _feed(feeder, executor, out, indices, corrupt=None):
             executor.spin_once(timeout_sec=0.0)
 
 
+def test_lost_samples_are_counted_per_stream_and_reported_on_diagnostics_and_in_the_estimates(context, executor,
+                                                                                            experiment):
+    """A node that joins at 34 s and then loses 250 GRS2 samples and 10 star-tracker samples (a
+    replay whose QoS dropped them) counts them per stream from its first sample, WARNs naming them,
+    and says how many in every estimate message."""
+    out = experiment
+    node = ScaleFactorEstimatorNode(context=context)
+    feeder = _Feeder(context)
+    executor.add_node(node)
+    executor.add_node(feeder.node)
+    assert spin_until(executor, lambda: feeder.star.get_subscription_count() >= 1)
+
+    def lose(f, k, t, q, v):
+        if 1000 <= k < 1250:
+            f.star_tracker(t, q)
+            f.voltages(t, 1, v[0])
+            return True
+        if 2000 <= k < 2010:
+            f.voltages(t, 1, v[0])
+            f.voltages(t, 2, v[1])
+            return True
+        return False
+
+    _feed(feeder, executor, out, range(340, N), lose)
+    last_ns = round(out.t_s[-1] * 1e9)
+    assert spin_until(executor, lambda: feeder.estimates and feeder.estimates[-1].header.stamp.sec
+                      * 10**9 + feeder.estimates[-1].header.stamp.nanosec == last_ns, timeout_s=60)
+    assert feeder.estimates[-1].samples_missing == 260
+    assert node.assembler.missing() == {"star_tracker": 10, "grs1": 0, "grs2": 250}
+    assert node.assembler.first_ns == round(out.t_s[340] * 1e9)
+
+    def last_status():
+        mine = [s for s in feeder.diagnostics if s.name == "scale_factor_estimator"]
+        return mine[-1] if mine else None
+
+    assert spin_until(executor, lambda: last_status() is not None and "missing input" in last_status().message
+                      and json.loads({kv.key: kv.value for kv in last_status().values}["missing"])["grs2"] == 250,
+                      timeout_s=10)
+    assert last_status().level == messages.diagnostic_msgs.DiagnosticStatus.WARN
+    assert "grs2 250 samples" in last_status().message
+
+
 def test_bad_inputs_are_rejected_counted_and_reported_while_the_estimate_goes_on(context, executor, experiment):
     out = experiment
     node = ScaleFactorEstimatorNode(context=context)

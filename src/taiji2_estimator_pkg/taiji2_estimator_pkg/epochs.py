@@ -1,15 +1,32 @@
 """Alignment of the raw streams (star tracker, GRS1, GRS2) into epochs by header stamp.
 
 Messages of each stream arrive in stamp order, but the streams interleave arbitrarily: how far one
-stream runs ahead of another depends on transport and executor batching (a bag replayed as fast as
-possible can put one topic many seconds of stamps ahead). So an epoch is released, in stamp order,
-once every stream has either delivered its sample for that stamp or moved past it; a stream that
-goes silent (no message for ``max_silence_s`` of wall time, e.g. a star-tracker dropout or a dead
-sensor) stops holding epochs back. ``max_pending`` bounds memory. Duplicate and out-of-order stamps
-of a stream are refused and counted. When every stream has stepped back in time (a restarted source,
-e.g. a simulator running its seed again) the next epoch released is marked ``after_restart``: the
-estimators start a new segment there instead of joining two runs' dynamics. Plain Python: no
-middleware.
+stream runs ahead of another in stamps depends on transport, executor batching and the backlog (with
+a backlog, a stream that had a gap covers more stamps per message taken than the others). So an
+epoch is released, in stamp order, once every stream has either delivered its sample for that stamp
+or moved past it. A stream that stops (a star-tracker dropout, a dead sensor, a stream never heard)
+stops holding epochs back once, since its last message, another stream has delivered ``max_lag_s``
+worth of samples (``max_lag_s`` times the sample rate, counted in messages).
+
+Every decision here is a function of the messages received and their order, never of wall time or
+of how far apart stamps are: a stream whose messages are merely late (its publisher starved of CPU,
+a slow transport, a reader drained in batches) keeps delivering between the others' messages and
+holds the epochs back however long it takes, so the epochs released - hence the estimate - are the
+same on an idle and on a busy machine. (Deciding on wall-clock silence, as this module once did,
+released epochs without the samples of a publisher descheduled for 0.5 s; those samples were then
+refused as out of order. Deciding on the stamp span the others ran ahead fails too: with a backlog,
+a stream that had a gap runs ahead in stamps.) The order of messages *across* readers is that of the
+executor's round robin (at most one take batch, 64 messages, of one reader in a row), so
+``max_lag_s`` must exceed that; streams from separate publishers in separate processes can drift
+apart by more under load, at high acceleration: raise ``max_lag_s`` there. Only ``max_pending``
+(memory) and :meth:`flush` (end of data) release an epoch otherwise.
+
+Duplicate and out-of-order stamps of a stream are refused and counted. Stamps at which a stream's
+sample did not enter an epoch are counted as missing, per stream, on the sample grid, from the first
+stamp this assembler received (it cannot know of samples sent before it listened). When every
+stream has stepped back in time (a restarted source, e.g. a simulator running its seed again) the
+next epoch released is marked ``after_restart``: the estimators start a new segment there instead of
+joining two runs' dynamics. Plain Python: no middleware.
 """
 
 from __future__ import annotations
@@ -40,22 +57,40 @@ class EpochAssembler:
     ----------
     streams : sequence of str
         Stream names, e.g. ``("star_tracker", "grs1", "grs2")``.
-    max_silence_s : float
-        A stream without a message for this long (wall clock) no longer holds epochs back [s].
+    max_lag_s : float
+        A stream from which no message arrived while another stream delivered this much data
+        (``max_lag_s / sample_period_s`` messages) no longer holds epochs back: they go without it [s].
+    sample_period_s : float
+        Sample period of the streams [s] (0.1 at 10 Hz): the grid on which missing samples are
+        counted, and the unit of ``max_lag_s`` in messages.
     max_pending : int
         At most this many epochs wait; the oldest is released beyond it.
     """
 
-    def __init__(self, streams: Sequence[str], max_silence_s: float, max_pending: int = 200_000) -> None:
+    def __init__(self, streams: Sequence[str], max_lag_s: float, sample_period_s: float = 0.1,
+                 max_pending: int = 200_000) -> None:
+        if not max_lag_s > 0:
+            raise ValueError(f"max_lag_s: must be > 0 s, got {max_lag_s!r}")
+        if not sample_period_s > 0:
+            raise ValueError(f"sample_period_s: must be > 0 s, got {sample_period_s!r}")
         self.streams = tuple(streams)
-        self.max_silence_s = float(max_silence_s)
+        self.period_ns = round(float(sample_period_s) * 1e9)
+        self.max_lag_messages = max(round(float(max_lag_s) / float(sample_period_s)), 1)
         self.max_pending = int(max_pending)
         self._pending: dict[int, Epoch] = {}
         self._latest: dict[str, int] = {s: -1 for s in self.streams}
-        self._heard: dict[str, float] = {}
-        self._first_heard_s: float | None = None
         self._released_ns = -1
+        #: messages received per stream, and their values at each stream's last message
+        self._received: dict[str, int] = {s: 0 for s in self.streams}
+        self._received_at_last: dict[str, dict[str, int]] = {s: dict(self._received) for s in self.streams}
         self.refused: dict[str, dict[str, int]] = {}
+        #: samples of each stream that entered a released epoch
+        self.delivered: dict[str, int] = {s: 0 for s in self.streams}
+        #: stamp of the first sample received from any stream [ns] (-1: none yet)
+        self.first_ns = -1
+        #: grid stamps from ``first_ns`` to the last released epoch, over segments (restarts)
+        self._grid_before = 0  # grid stamps of the segments before the current one
+        self._segment_first_ns = -1
         #: streams whose stamps went back by more than RESTART_STEP_BACK_NS since the last released epoch
         self._went_back: set[str] = set()
 
@@ -63,13 +98,14 @@ class EpochAssembler:
         counts = self.refused.setdefault(stream, {})
         counts[reason] = counts.get(reason, 0) + 1
 
-    def add(self, stream: str, t_ns: int, payload: Any, now_s: float) -> list[Epoch]:
-        """Add a sample received at wall time ``now_s`` [s]; returns the epochs now ready, oldest first."""
+    def add(self, stream: str, t_ns: int, payload: Any) -> list[Epoch]:
+        """Add a sample stamped ``t_ns`` [ns]; returns the epochs now ready, oldest first."""
         if stream not in self._latest:
             raise KeyError(f"unknown stream {stream!r}")
-        self._heard[stream] = now_s
-        if self._first_heard_s is None:
-            self._first_heard_s = now_s
+        if self.first_ns < 0:
+            self.first_ns = self._segment_first_ns = int(t_ns)
+        self._received[stream] += 1
+        self._received_at_last[stream] = dict(self._received)
         if t_ns == self._latest[stream]:
             self._refuse(stream, "duplicate_stamp")
             return []
@@ -80,20 +116,23 @@ class EpochAssembler:
             return []
         self._latest[stream] = t_ns
         self._pending.setdefault(t_ns, Epoch(t_ns)).samples[stream] = payload
-        return self.expire(now_s)
+        return self._ready()
 
-    def expire(self, now_s: float) -> list[Epoch]:
-        """The epochs ready at wall time ``now_s``: complete, passed by every stream, or waiting only
-        for silent streams (call periodically so that a dropout does not stall the output)."""
-        # a stream never heard counts from the first message of any stream
-        start = self._first_heard_s if self._first_heard_s is not None else now_s
-        silent = {s for s in self.streams if now_s - self._heard.get(s, start) >= self.max_silence_s}
+    def _dead(self) -> set[str]:
+        """Streams from which nothing arrived while another delivered ``max_lag_s`` worth of messages."""
+        return {s for s in self.streams
+                if max(self._received[o] - self._received_at_last[s][o] for o in self.streams)
+                >= self.max_lag_messages}
+
+    def _ready(self) -> list[Epoch]:
+        """The epochs every stream has delivered or passed, or that wait only for dead streams (or overflow)."""
+        dead = self._dead()
         released: list[Epoch] = []
         for t_ns in sorted(self._pending):
             epoch = self._pending[t_ns]
             waiting = [s for s in self.streams if s not in epoch.samples and self._latest[s] < t_ns]
             overflow = len(self._pending) > self.max_pending
-            if waiting and not overflow and not all(s in silent for s in waiting):
+            if waiting and not overflow and not all(s in dead for s in waiting):
                 break
             released.append(self._release(t_ns))
         return released
@@ -103,17 +142,42 @@ class EpochAssembler:
         # a restart sends every stream back; one stale or flooding peer sends back only its own topic
         epoch.after_restart = self._went_back >= set(self.streams)
         self._went_back.clear()
+        if epoch.after_restart:
+            self._grid_before += self._grid_count(self._segment_first_ns, self._released_ns)
+            self._segment_first_ns = t_ns
+        for stream in epoch.samples:
+            self.delivered[stream] += 1
         self._released_ns = t_ns
         return epoch
+
+    def _grid_count(self, first_ns: int, last_ns: int) -> int:
+        return 0 if first_ns < 0 or last_ns < first_ns else round((last_ns - first_ns) / self.period_ns) + 1
+
+    def grid_stamps(self) -> int:
+        """Stamps of the sample grid from the first sample received to the last released epoch."""
+        return self._grid_before + self._grid_count(self._segment_first_ns, self._released_ns)
+
+    def missing(self) -> dict[str, int]:
+        """Per stream: grid stamps from the first sample received to the last released epoch at which
+        its sample did not enter an epoch (lost in transport, dropped, refused, or never sent)."""
+        grid = self.grid_stamps()
+        return {s: max(grid - self.delivered[s], 0) for s in self.streams}
 
     def flush(self) -> list[Epoch]:
         """Release everything still pending (end of data), oldest first."""
         return [self._release(t) for t in sorted(self._pending)]
 
     def state_dict(self) -> dict[str, Any]:
-        return {"latest": dict(self._latest), "released_ns": self._released_ns, "refused": self.refused}
+        return {"latest": dict(self._latest), "released_ns": self._released_ns, "refused": self.refused,
+                "delivered": dict(self.delivered), "first_ns": self.first_ns,
+                "grid_before": self._grid_before, "segment_first_ns": self._segment_first_ns}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self._latest.update({k: int(v) for k, v in state["latest"].items()})
         self._released_ns = int(state["released_ns"])
         self.refused = {k: dict(v) for k, v in state["refused"].items()}
+        # checkpoints written before missing samples were counted: count from the restart on
+        self.delivered.update({k: int(v) for k, v in state.get("delivered", {}).items()})
+        self.first_ns = int(state.get("first_ns", -1))
+        self._grid_before = int(state.get("grid_before", 0))
+        self._segment_first_ns = int(state.get("segment_first_ns", self.first_ns))

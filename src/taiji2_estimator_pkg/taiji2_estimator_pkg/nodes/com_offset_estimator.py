@@ -56,14 +56,15 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         for gid in GRS_IDS:
             self.create_subscription(t.GrsVoltages, common.GRS_TOPICS[gid], lambda m, g=gid: self._on_grs(m, g), qos)
             self.create_subscription(t.ScaleFactorEstimate, f"/taiji2/estimates/grs{gid}/scale_factors",
-                                     self._on_scale_factors, common.estimate_qos())
+                                     self._on_scale_factors, common.estimate_subscription_qos())
         if self.paper:
             self.create_subscription(t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
         if self.use_rate:
             self.create_subscription(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, self._on_rate, qos)
-        self.pubs = {g: self.create_publisher(t.ComOffsetEstimate, f"/taiji2/estimates/grs{g}/com_offset", qos)
-                     for g in GRS_IDS}
-        self.diff_pub = self.create_publisher(t.ComOffsetEstimate, "/taiji2/estimates/com_offset_difference", qos)
+        self.pubs = {g: self.create_publisher(t.ComOffsetEstimate, f"/taiji2/estimates/grs{g}/com_offset",
+                                              common.estimate_qos()) for g in GRS_IDS}
+        self.diff_pub = self.create_publisher(t.ComOffsetEstimate, "/taiji2/estimates/com_offset_difference",
+                                              common.estimate_qos())
         self.get_logger().info(f"method {self.p['method']}, nominal model {self.p['layout']}")
 
     def streams(self) -> Sequence[str]:
@@ -194,6 +195,8 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         msg.covariance = [float(v) for v in np.asarray(cov).ravel()]
         msg.samples_used = int(estimate.n_samples)
         msg.samples_rejected = int(rejected)
+        msg.samples_missing = self.samples_missing()
+        msg.latency_s = self.latency_s(t_ns)
         msg.nis = self.last_nis
         msg.nis_mean = float(estimate.nis_mean)
         return msg

@@ -38,7 +38,6 @@ RESUME_WARN_REPORTS = 10
 #: Core keys the nodes fix: both GRS are always estimated jointly (the two topics of the contract).
 _FIXED = {"grs_ids": [1, 2]}
 
-
 def declare_parameters(node: Any, node_name: str) -> dict[str, Any]:
     """Declare every parameter of ``node_name`` (core defaults + node glue); returns dotted-key values.
 
@@ -78,9 +77,18 @@ def raw_qos() -> Any:
 
 
 def estimate_qos() -> Any:
-    """Reliable keep-all, transient local: estimates are kept for late joiners, so a c.m.-offset
-    estimator (re)started after the scale-factor estimator's last estimate still gets it. Volatile
-    subscribers (recorders, plots, ``ros2 topic echo``) match it as well."""
+    """Publishers of estimates: reliable, transient local, keep-last 1. A late joiner (``ros2 topic echo
+    --once``, a plot, a c.m.-offset estimator restarted after the scale-factor estimator's last estimate)
+    gets the latest estimate, not the history from the first (undetermined, NaN) one. Volatile subscribers
+    (recorders, ``ros2 topic echo``) match it as well."""
+    return rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_LAST, depth=1,
+                                reliability=rclpy.qos.ReliabilityPolicy.RELIABLE,
+                                durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def estimate_subscription_qos() -> Any:
+    """Subscriptions to estimates: reliable, transient local (the latest estimate on joining), keep-all (every
+    estimate published after that is taken, none replaced in the reader's queue while a callback runs)."""
     return rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL,
                                 reliability=rclpy.qos.ReliabilityPolicy.RELIABLE,
                                 durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
@@ -147,13 +155,20 @@ def new_rejections(now: dict[str, dict[str, int]], before: dict[str, dict[str, i
     return fresh
 
 
-def health(nis_mean: float, determined: bool, starved: bool, fresh_rejections: dict[str, int]) -> tuple[str, str]:
-    """(level, message) of an estimator: WARN when starved, rejecting input, or inconsistent."""
+def health(nis_mean: float, determined: bool, starved: bool, fresh_rejections: dict[str, int],
+           lost: dict[str, tuple[int, float]] | None = None) -> tuple[str, str]:
+    """(level, message) of an estimator: WARN when starved, rejecting input, missing input, or inconsistent.
+
+    ``lost``: stream -> (missing samples, fraction of the grid stamps) of the streams above the warning
+    fraction."""
     if starved:
         return "WARN", "starved: no raw data recently"
     if fresh_rejections:
         listed = ", ".join(f"{what} x{n}" for what, n in sorted(fresh_rejections.items()))
         return "WARN", f"rejected input: {listed}"
+    if lost:
+        listed = ", ".join(f"{s} {n} samples ({100 * f:.2g} %)" for s, (n, f) in sorted(lost.items()))
+        return "WARN", f"missing input: {listed}"
     if not determined:
         return "OK", "collecting data (estimate not yet determined)"
     if np.isfinite(nis_mean) and not 0.5 < nis_mean < 2.0:
@@ -171,7 +186,7 @@ class EstimatorNode(rclpy.node.Node):
         self.p = declare_parameters(self, node_name)
         accept_runtime_parameters(self, self.p)
         self.instrument = instrument_from(self.p)
-        self.assembler = EpochAssembler(self.streams(), self.p["max_stream_silence_s"])
+        self.assembler = EpochAssembler(self.streams(), self.p["max_stream_lag_s"], self.instrument.dt_s)
         self.node_rejections = RejectionCounts()
         self.reported_rejections: dict[str, dict[str, int]] = {}
         self.last_data_wall = time.monotonic()
@@ -188,7 +203,7 @@ class EstimatorNode(rclpy.node.Node):
         self.diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
         steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
         self.create_timer(1.0, self.publish_health, clock=steady)
-        self.create_timer(0.5, self._release_silent, clock=steady)
+        self.create_timer(0.5, self._end_of_data_tick, clock=steady)
 
     # -- input -----------------------------------------------------------------------------------
     def add_sample(self, stream: str, t_ns: int, payload: Any) -> None:
@@ -197,12 +212,11 @@ class EstimatorNode(rclpy.node.Node):
             self.data_gap_s = (t_ns - self.resumed_from_ns) / 1e9
             self.get_logger().info(f"first data beyond the checkpoint at t = {t_ns / 1e9:.1f} s: data gap "
                                    f"{self.data_gap_s:.1f} s")
-        for epoch in self.assembler.add(stream, t_ns, payload, self.last_data_wall):
+        for epoch in self.assembler.add(stream, t_ns, payload):
             self._process_epoch(epoch)
 
-    def _release_silent(self) -> None:
-        for epoch in self.assembler.expire(time.monotonic()):
-            self._process_epoch(epoch)
+    def _end_of_data_tick(self) -> None:
+        # wall time decides only *when* the last estimate goes out, never which epochs it holds
         self._publish_at_end_of_data()
 
     def _process_epoch(self, epoch: Any) -> None:
@@ -301,6 +315,22 @@ class EstimatorNode(rclpy.node.Node):
             self.resume_warn_left -= 1
         return "WARN", note if level == "OK" else f"{text}; {note}"
 
+    def lost_streams(self, missing: dict[str, int]) -> dict[str, tuple[int, float]]:
+        """Streams whose missing samples exceed ``missing_warn_fraction`` of the grid stamps so far."""
+        grid = max(self.assembler.grid_stamps(), 1)
+        return {s: (n, n / grid) for s, n in missing.items() if n and n / grid > self.p["missing_warn_fraction"]}
+
+    def latency_s(self, t_ns: int) -> float:
+        """Publication time minus the stamp ``t_ns`` on the graph's clock [s]; NaN off sim time (the
+        node's wall clock and the data's stamps need not share an epoch)."""
+        if not self.get_parameter("use_sim_time").value:
+            return float("nan")
+        return (self.get_clock().now().nanoseconds - int(t_ns)) / 1e9
+
+    def samples_missing(self) -> int:
+        """Missing samples summed over the raw streams (for the estimate messages)."""
+        return int(sum(self.assembler.missing().values()))
+
     def publish_health(self, waiting_for: str | None = None) -> None:
         """``/diagnostics``: OK, or WARN when starved, rejecting input (named), or inconsistent."""
         estimate = self.last_estimate
@@ -308,8 +338,9 @@ class EstimatorNode(rclpy.node.Node):
         starved = time.monotonic() - self.last_data_wall > self.p["starved_after_s"]
         fresh = new_rejections(counts, self.reported_rejections)
         self.reported_rejections = counts
+        missing = self.assembler.missing()
         level, text = health(estimate.nis_mean if estimate else float("nan"),
-                             bool(estimate and estimate.determined), starved, fresh)
+                             bool(estimate and estimate.determined), starved, fresh, self.lost_streams(missing))
         now = time.monotonic()
         # the health timer ticks every second: a much longer gap means this process was not run
         # (SIGSTOP, or a starved CPU) and its input queued up meanwhile
@@ -325,7 +356,8 @@ class EstimatorNode(rclpy.node.Node):
             "rejected": counts, "nis_mean": None if estimate is None else estimate.nis_mean,
             "last_stamp_s": None if estimate is None else estimate.t_s, "paused_s": max(paused_s, 0.0),
             "resumed_from_s": None if self.resumed_from_ns is None else self.resumed_from_ns / 1e9,
-            "data_gap_s": self.data_gap_s})
+            "data_gap_s": self.data_gap_s, "missing": missing,
+            "first_stamp_s": None if self.assembler.first_ns < 0 else self.assembler.first_ns / 1e9})
         array = messages.diagnostic_msgs.DiagnosticArray(status=[status])
         set_stamp(array.header, round(estimate.t_s * 1e9) if estimate is not None and np.isfinite(estimate.t_s) else 0)
         self.diag_pub.publish(array)

@@ -115,6 +115,7 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
         self.last_estimate = estimate
         self.last_publish_ns = t_ns
         rejected = common.total(self.rejection_counts())
+        missing, latency = self.samples_missing(), self.latency_s(t_ns)
         t = messages.taiji2_msgs
         for index, gid in enumerate(GRS_IDS):
             msg = t.ScaleFactorEstimate(grs_id=gid, method=estimate.method)
@@ -127,6 +128,8 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
             msg.cross_covariance = [float(v) for v in estimate.covariance[block, other].ravel()]
             msg.samples_used = int(estimate.n_samples)
             msg.samples_rejected = int(rejected)
+            msg.samples_missing = missing
+            msg.latency_s = latency
             msg.nis = self.last_nis
             msg.nis_mean = float(estimate.nis_mean)
             self.estimate_pubs[gid].publish(msg)
