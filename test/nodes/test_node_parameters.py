@@ -53,39 +53,59 @@ def test_estimator_parameters_are_read_only_except_the_runtime_ones(context, nod
         assert node.p[name] == 0.25 and node.get_parameter(name).value == 0.25
 
 
+class RawFeeder:
+    """A node publishing the raw contract topics from a batch simulation; collects grs1 scale-factor stamps."""
+
+    def __init__(self, context, executor, n_samples: int):
+        config = load_config("type1", overrides={"maneuver.duration_s": n_samples / 10})
+        self.out = simulate_batch(config, 26, maneuver_torque_commands(config, n_samples))
+        self.executor = executor
+        self.node = rclpy.node.Node("feeder", context=context)
+        t = messages.taiji2_msgs
+        qos = rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL)
+        self.star = self.node.create_publisher(t.StarTracker, "/taiji2/star_tracker", qos)
+        self.grs = {g: self.node.create_publisher(t.GrsVoltages, f"/taiji2/grs{g}/voltages", qos) for g in (1, 2)}
+        self.stamps: list[float] = []
+        self.node.create_subscription(t.ScaleFactorEstimate, "/taiji2/estimates/grs1/scale_factors",
+                                      lambda m: self.stamps.append(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9),
+                                      qos)
+        executor.add_node(self.node)
+
+    def wait_for_readers(self, grs_readers: int) -> None:
+        """Until the star tracker has a reader and each GRS topic ``grs_readers``."""
+        assert spin_until(self.executor, lambda: self.star.get_subscription_count() >= 1 and all(
+            p.get_subscription_count() >= grs_readers for p in self.grs.values()))
+
+    def feed(self) -> float:
+        """Publish every sample (spinning now and then); returns the last stamp [s]."""
+        t, out = messages.taiji2_msgs, self.out
+        for k in range(len(out.t_s)):
+            sec, nanosec = divmod(round(out.t_s[k] * 1e9), 10**9)
+            m = t.StarTracker()
+            m.header.stamp.sec, m.header.stamp.nanosec, m.header.frame_id = sec, nanosec, "crf"
+            m.attitude.x, m.attitude.y, m.attitude.z, m.attitude.w = (float(v) for v in out.st_quat_xyzw[k])
+            self.star.publish(m)
+            for g in (1, 2):
+                v = t.GrsVoltages(grs_id=g)
+                v.header.stamp.sec, v.header.stamp.nanosec, v.header.frame_id = sec, nanosec, f"tmrf{g}"
+                v.vx1, v.vx2, v.vy1, v.vy2, v.vz1, v.vz2 = (float(x) for x in out.voltages_v[k][g - 1])
+                self.grs[g].publish(v)
+            if k % 100 == 0:
+                self.executor.spin_once(timeout_sec=0.0)
+        return float(out.t_s[-1])
+
+
 def test_a_publish_period_set_at_run_time_takes_effect(context, executor):
-    config = load_config("type1", overrides={"maneuver.duration_s": N / 10})
-    out = simulate_batch(config, 26, maneuver_torque_commands(config, N))
     node = ScaleFactorEstimatorNode(context=context)
-    feeder = rclpy.node.Node("feeder", context=context)
-    t = messages.taiji2_msgs
-    qos = rclpy.qos.QoSProfile(history=rclpy.qos.HistoryPolicy.KEEP_ALL)
-    star = feeder.create_publisher(t.StarTracker, "/taiji2/star_tracker", qos)
-    grs = {g: feeder.create_publisher(t.GrsVoltages, f"/taiji2/grs{g}/voltages", qos) for g in (1, 2)}
-    stamps: list[float] = []
-    feeder.create_subscription(t.ScaleFactorEstimate, "/taiji2/estimates/grs1/scale_factors",
-                               lambda m: stamps.append(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9), qos)
-    for n in (node, feeder):
-        executor.add_node(n)
-    assert spin_until(executor, lambda: star.get_subscription_count() >= 1 and grs[2].get_subscription_count() >= 1)
+    executor.add_node(node)
+    feeder = RawFeeder(context, executor, N)
+    feeder.wait_for_readers(1)
     assert _set(node, "publish_period_s", 20.0).successful  # `ros2 param set ... publish_period_s 20.0`
-    for k in range(N):
-        sec, nanosec = divmod(round(out.t_s[k] * 1e9), 10**9)
-        m = t.StarTracker()
-        m.header.stamp.sec, m.header.stamp.nanosec, m.header.frame_id = sec, nanosec, "crf"
-        m.attitude.x, m.attitude.y, m.attitude.z, m.attitude.w = (float(v) for v in out.st_quat_xyzw[k])
-        star.publish(m)
-        for g in (1, 2):
-            v = t.GrsVoltages(grs_id=g)
-            v.header.stamp.sec, v.header.stamp.nanosec, v.header.frame_id = sec, nanosec, f"tmrf{g}"
-            v.vx1, v.vx2, v.vy1, v.vy2, v.vz1, v.vz2 = (float(x) for x in out.voltages_v[k][g - 1])
-            grs[g].publish(v)
-        if k % 100 == 0:
-            executor.spin_once(timeout_sec=0.0)
-    last = float(out.t_s[N - 1])
+    last = feeder.feed()
+    stamps = feeder.stamps
     assert spin_until(executor, lambda: stamps and abs(stamps[-1] - last) < 1e-6, timeout_s=60)
     # one estimate per 20 s of data (the first epoch, 20, 40 s) and the end of data, not one per second
-    assert [round(s, 1) for s in stamps] == [round(float(out.t_s[0]), 1), 20.0, 40.0, round(last, 1)], stamps
+    assert [round(s, 1) for s in stamps] == [round(float(feeder.out.t_s[0]), 1), 20.0, 40.0, round(last, 1)], stamps
 
 
 def test_commander_and_simulator_parameters_are_read_only_but_the_lookahead(context):
