@@ -58,7 +58,8 @@ def ros(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., subprocess.Co
     if not Path(ROS_ENV).is_file():
         pytest.skip(f"no ROS 2 environment script at {ROS_ENV}")
     ws = tmp_path_factory.mktemp("ws")
-    domain = str(_domain_without_daemon())
+    # TAIJI2_RCLPY_DOMAIN: a domain of the caller's choosing (several sessions sharing a host)
+    domain = os.environ.get("TAIJI2_RCLPY_DOMAIN") or str(_domain_without_daemon())
     # every site directory of this interpreter, including those a .pth file adds (.ci/run's .venv-ros
     # reaches the README's .venv that way), since PYTHONPATH entries do not process .pth files
     packages = ":".join(p for p in sys.path if p.endswith("-packages"))  # in this interpreter's order

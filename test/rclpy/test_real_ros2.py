@@ -149,8 +149,12 @@ def test_embedded_tools_see_rclpy_node_and_its_parameters(ros):
     real = ros("exec ros2 run taiji2_sim_pkg maneuver_commander --ros-args -p period_s:=250.0", background=True)
     taiji2 = "python3 -m taiji2_runtime.cli.main"
     try:
-        listed = ros(f"for i in $(seq 30); do {taiji2} node list | grep -qx /maneuver_commander && break; done; "
-                     f"{taiji2} node list", env={"TAIJI2_RUNTIME": "cyclonedds"}, timeout=180)
+        # with ros2cli's daemon (a hidden node, /_ros2cli_daemon_...) in the graph, as on a ROS 2 machine
+        listed = ros(f"ros2 daemon start >/dev/null; "
+                     f"for i in $(seq 30); do {taiji2} node list -a | grep -q '^/_ros2cli_daemon' && "
+                     f"{taiji2} node list | grep -qx /maneuver_commander && break; done; "
+                     f"{taiji2} node list; echo ---; {taiji2} node list -a; ros2 daemon stop >/dev/null",
+                     env={"TAIJI2_RUNTIME": "cyclonedds"}, timeout=180)
         params = ros(f"{taiji2} param get /maneuver_commander period_s && "
                      f"{taiji2} param set /maneuver_commander lookahead_s 2.5 && "
                      f"{taiji2} param get /maneuver_commander lookahead_s && "
@@ -159,7 +163,11 @@ def test_embedded_tools_see_rclpy_node_and_its_parameters(ros):
                      env={"TAIJI2_RUNTIME": "cyclonedds"}, timeout=120)
     finally:
         status, err = _stop(real)
-    assert "/maneuver_commander" in listed.stdout.splitlines(), listed.stderr
+    plain, everything = listed.stdout.split("---\n")
+    assert "/maneuver_commander" in plain.splitlines(), listed.stderr
+    # hidden nodes as ros2 node list hides them (issue 26 row 10); -a shows them
+    assert not any(n.startswith("/_") for n in plain.splitlines()), plain
+    assert any(n.startswith("/_ros2cli_daemon") for n in everything.splitlines()), everything
     assert params.returncode == 0, params.stderr
     assert params.stdout.splitlines() == ["Double value is: 250.0", "Set parameter successful",
                                           "Double value is: 2.5"]

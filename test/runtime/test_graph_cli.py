@@ -49,3 +49,19 @@ def test_node_list_and_param_get_set_reach_an_embedded_node():
     finally:
         node.send_signal(signal.SIGTERM)
         node.wait(timeout=10)
+
+
+def test_node_list_hides_hidden_nodes_as_ros2_node_list_does(context):
+    # a name starting with "_" (ros2cli's daemon is /_ros2cli_daemon_...): listed only with -a (issue 26 row 10)
+    from taiji2_runtime.ros import rclpy
+
+    nodes = [rclpy.node.Node(name, context=context) for name in ("visible_probe", "_hidden_probe")]
+    deadline = time.monotonic() + 30
+    listed = _taiji2("node", "list", "-a")
+    while "/_hidden_probe" not in listed.stdout.splitlines() and time.monotonic() < deadline:
+        listed = _taiji2("node", "list", "-a")
+    assert {"/visible_probe", "/_hidden_probe"} <= set(listed.stdout.splitlines()), listed.stderr
+    plain = _taiji2("node", "list").stdout.splitlines()
+    assert "/visible_probe" in plain and not any(n.rsplit("/", 1)[-1].startswith("_") for n in plain), plain
+    for node in nodes:
+        node.destroy_node()

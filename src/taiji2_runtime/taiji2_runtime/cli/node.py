@@ -14,6 +14,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub.required = True
     p_list = sub.add_parser("list", help="nodes in the graph (read from ros_discovery_info)")
     p_list.add_argument("--wait", type=float, default=DISCOVERY_S, help="seconds to listen for discovery")
+    p_list.add_argument("-a", "--all", action="store_true",
+                        help="also hidden nodes (name starting with '_', e.g. ros2cli's daemon), as ros2 node list -a")
 
 
 def graph_nodes(wait_s: float) -> list[str]:
@@ -32,7 +34,13 @@ def graph_nodes(wait_s: float) -> list[str]:
         context.try_shutdown()
 
 
+def is_hidden(fqn: str) -> bool:
+    """A hidden node, as rclpy and ros2cli define it: its name (not its namespace) starts with ``_``."""
+    return fqn.rsplit("/", 1)[-1].startswith("_")
+
+
 def main(args: argparse.Namespace) -> int:
     for name in graph_nodes(args.wait):
-        print(name)
+        if args.all or not is_hidden(name):
+            print(name)
     return 0
