@@ -148,3 +148,30 @@ def test_lost_epochs_do_not_bias_the_scale_factors():
     sigma_difference = np.sqrt(var_gappy - var_complete)
     assert np.all(var_gappy > var_complete)
     assert np.all(np.abs(gappy - complete) < 4.0 * sigma_difference), (gappy - complete) / sigma_difference
+
+
+def test_a_grs_dropout_longer_than_the_bridged_gap_neither_gates_the_star_tracker_nor_splits_the_paths():
+    """Both GRS lost for 100 s while the star tracker goes on (the case that, before the stale-input
+    rule, had the gate reject ~1,000 star-tracker and ~600 GRS-pair samples): the star-tracker samples
+    beyond ``max_bridged_gap_s`` are counted as ``no_grs_input``, nothing is gated, the node path equals
+    the bulk path (1e-6 sigma), and G stays within 3 sigma of the complete record's."""
+    config, out = simulate("type1", 1200.0, 4)
+    instrument = InstrumentModel.from_layout(config)
+    t, quat = out.t_s, out.st_quat_xyzw
+    volts = out.voltages_v.copy()
+    lost = slice(3000, 4000)
+    volts[lost] = np.nan
+    full = ScaleFactorEstimator(instrument).process_batch(t, quat, out.voltages_v)
+    bulk = ScaleFactorEstimator(instrument).process_batch(t, quat, volts)
+    node = ScaleFactorEstimator(instrument)
+    for k in range(t.size):
+        v = {g: volts[k, g - 1] for g in (1, 2) if not np.all(np.isnan(volts[k, g - 1]))}
+        node.update(t[k], quat[k], v)
+    g_node = node.estimate()
+    bridged = round(ScaleFactorEstimator(instrument).options.max_bridged_gap_s * 10)
+    # (NaN GRS rows are rejected in bulk and absent on the node path: only the star tracker compares)
+    assert bulk.rejected["star_tracker"] == g_node.rejected["star_tracker"] == {"no_grs_input": 1000 - bridged}
+    assert "gated" not in str(bulk.rejected) + str(g_node.rejected)
+    sigma = np.sqrt(np.diag(bulk.covariance))
+    assert np.all(np.abs(g_node.values - bulk.values) < 1e-6 * sigma)
+    assert np.all(np.abs(bulk.values - full.values) < 3 * sigma)

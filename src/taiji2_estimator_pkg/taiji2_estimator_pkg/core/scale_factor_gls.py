@@ -18,6 +18,7 @@ from .instrument import InstrumentModel
 from .kalman import chi2_gate
 from .scale_factor_estimate import ScaleFactorEstimate, StepReport
 from .scale_factor_model import ScaleFactorModel, ScaleFactorOptions
+from .stale_input import STALE_REASON, stale_star_tracker
 from .twostage import TwoStageFilter, solve_information
 from .validation import InputValidator, ValidationOptions, validate_batch
 
@@ -75,6 +76,8 @@ class ScaleFactorEstimator:
         self._segments_x0: list[tuple[np.ndarray, np.ndarray]] = []
         #: input regressor and GRS of the last step with GRS data, held over steps without any
         self._held: tuple[np.ndarray, tuple[int, ...]] | None = None
+        #: stamp of the last epoch with an accepted GRS sample [s] (stale star tracker: core/stale_input.py)
+        self.last_grs_t_s: float | None = None
         self.last_index: int | None = None
         self.t0_s: float | None = None
         self.t_last_s = float("nan")
@@ -252,6 +255,13 @@ class ScaleFactorEstimator:
                 diffs[int(gid)] = np.array((v[2] - v[3], v[4] - v[5], v[0] - v[1]))
             else:
                 rejections.append((f"grs{gid}", str(check.reason)))
+        if diffs:
+            self.last_grs_t_s = float(t_s)
+        elif q_ok is not None and self.last_grs_t_s is not None \
+                and float(t_s) - self.last_grs_t_s > self.options.max_bridged_gap_s:
+            q_ok = None  # no input to predict it with (core/stale_input.py)
+            self.validator.counts.setdefault("star_tracker", Counter())[STALE_REASON] += 1
+            rejections.append(("star_tracker", STALE_REASON))
         if q_ok is None and not diffs:
             return StepReport(float(t_s), float("nan"), float("nan"), False, tuple(rejections))
         index = self._index(t_s)
@@ -322,6 +332,13 @@ class ScaleFactorEstimator:
         if self.last_index is not None or self.filter.n_updates:
             raise RuntimeError("process_batch runs on a fresh estimator (use update() to continue)")
         checked = validate_batch(t, quat_xyzw, volts, self.validator.options, self.grs_ids)
+        on_grid = checked.grid_index >= 0
+        stale = stale_star_tracker(t, checked.star_tracker_ok & on_grid, checked.grs_ok & on_grid[:, None],
+                                   self.options.max_bridged_gap_s)
+        if np.any(stale):
+            checked.star_tracker_ok = checked.star_tracker_ok & ~stale
+            star_counts = checked.counts.setdefault("star_tracker", {})
+            star_counts[STALE_REASON] = star_counts.get(STALE_REASON, 0) + int(np.count_nonzero(stale))
         for stream, counts in checked.counts.items():
             for reason, number in counts.items():
                 self.validator.counts.setdefault(stream, Counter())[reason] += number
@@ -362,6 +379,8 @@ class ScaleFactorEstimator:
             self.last_index = int(epochs.index[-1])
             self.t0_s = float(epochs.t0)
             self.t_last_s = float(epochs.t[-1])
+            grs_rows = np.flatnonzero(np.any(epochs.grs_ok, axis=1))
+            self.last_grs_t_s = float(epochs.t[grs_rows[-1]]) if grs_rows.size else None
             self.attitude.load_state_dict({"last": epochs.last_quat.tolist(), "phi": epochs.last_phi.tolist()})
         return self.estimate()
 
@@ -522,6 +541,7 @@ class ScaleFactorEstimator:
             "determined": self.determined, "last_index": self.last_index, "t0_s": self.t0_s,
             "t_last_s": self.t_last_s,
             "held": None if self._held is None else [self._held[0].tolist(), list(self._held[1])],
+            "last_grs_t_s": self.last_grs_t_s,
         }
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
@@ -540,6 +560,7 @@ class ScaleFactorEstimator:
         self.t0_s = state["t0_s"]
         self.t_last_s = float(state["t_last_s"])
         held = state.get("held")  # absent from checkpoints written before it was kept
+        self.last_grs_t_s = state.get("last_grs_t_s")
         self._held = None if held is None else (np.asarray(held[0], dtype=np.float64), tuple(int(g) for g in held[1]))
         self._cache = None
 
