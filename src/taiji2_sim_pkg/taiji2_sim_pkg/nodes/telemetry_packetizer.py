@@ -40,6 +40,9 @@ class TelemetryPacketizer(rclpy.node.Node):
         end_s = self.declare_parameter("end_of_data_s", -1.0, _descriptor(
             "the run's last sample time [s]: at it the telemetry ends (end_of_data); -1: never")).value
         self._end_ns = round(end_s * _NS) if end_s >= 0 else None
+        self._command_margin_ns = round(_NS * self.declare_parameter("command_end_margin_s", 0.1, _descriptor(
+            "at the end, the executed-command stream need only have reached end_of_data_s minus this [s] (a "
+            "command stamped at or after end_of_data_s acts after the run: not telemetry of it)")).value)
         t = messages.taiji2_msgs
         qos = lt.reliable_all()
         self._pending: list[tuple[int, int, int, bytes]] = []  # heap (time, stream order, n, packet)
@@ -57,7 +60,10 @@ class TelemetryPacketizer(rclpy.node.Node):
                                  self._on_command, qos)
 
     def _add(self, k: int, t_ns: int, values: Sequence[float]) -> None:
-        if t_ns <= self._latest[k] or self._ended or (self._end_ns is not None and t_ns > self._end_ns):
+        beyond = self._end_ns is not None and (t_ns > self._end_ns or (k == 3 and t_ns >= self._end_ns))
+        if t_ns <= self._latest[k] or self._ended or beyond:
+            if beyond and k == 3:
+                self._latest[3] = max(self._latest[3], t_ns)  # the command stream has passed the end
             return  # a repeated or late stamp, or beyond the run: not telemetry of this run
         self._latest[k] = t_ns
         packet = encode_packet(STREAMS[k], self._seq[k], t_ns, values)
@@ -67,8 +73,9 @@ class TelemetryPacketizer(rclpy.node.Node):
         self._flush()
 
     def _flush(self) -> None:
-        through = min(self._latest)  # complete through: every stream has passed it
-        end = self._end_ns is not None and min(self._latest[:3]) >= self._end_ns
+        through = min(min(self._latest), self._end_ns if self._end_ns is not None else min(self._latest))
+        end = (self._end_ns is not None and min(self._latest[:3]) >= self._end_ns
+               and self._latest[3] >= self._end_ns - self._command_margin_ns)
         if not end and through - self._sent_through < self._burst_ns:
             return
         if end:
