@@ -16,8 +16,6 @@ from pathlib import Path
 
 import pytest
 
-from taiji2_runtime.dds_rclpy.context import DEFAULT_CYCLONEDDS_CONFIG
-
 REPO = Path(__file__).resolve().parents[2]
 ENABLED = os.environ.get("TAIJI2_RCLPY_TIER") == "1"
 if not ENABLED:
@@ -71,14 +69,18 @@ def ros(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., subprocess.Co
                            capture_output=True, text=True, timeout=900)
     assert build.returncode == 0, build.stdout[-3000:]
     prefix += f" && source {ws}/install/setup.bash"
+    printed = subprocess.run(["bash", "-c", f"{prefix} && env -u CYCLONEDDS_URI ros2 run taiji2_runtime taiji2 "
+                              "--print-cyclonedds-config"], capture_output=True, text=True, timeout=60)
+    assert printed.returncode == 0 and printed.stdout.startswith("<CycloneDDS>"), printed.stderr
+    cyclonedds_uri = printed.stdout.strip()
 
     def run(command: str, timeout: float = 120.0, env: dict[str, str] | None = None,
             background: bool = False) -> subprocess.CompletedProcess | subprocess.Popen:
         full_env = {**os.environ, **(env or {})}
         full_env.pop("TAIJI2_RUNTIME", None)
-        # one Cyclone configuration for rclpy (rmw_cyclonedds) and embedded nodes: the embedded
-        # runtime's loopback default, so both discover each other (the mixed-graph setup of docs/runtime.md)
-        full_env["CYCLONEDDS_URI"] = DEFAULT_CYCLONEDDS_CONFIG
+        # one Cyclone configuration for rclpy (rmw_cyclonedds) and embedded nodes, taken as the README says:
+        # export CYCLONEDDS_URI="$(taiji2 --print-cyclonedds-config)" (the embedded runtime's loopback default)
+        full_env["CYCLONEDDS_URI"] = cyclonedds_uri
         full_env.update(env or {})
         args = ["bash", "-c", f"{prefix} && {command}"]
         if background:

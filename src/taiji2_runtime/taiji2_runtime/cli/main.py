@@ -73,6 +73,10 @@ def _summary(module: ModuleType) -> str:
 
 def _top_parser(verbs: dict[str, str]) -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
     parser = argparse.ArgumentParser(prog=_PROG, description=_DESCRIPTION)
+    parser.add_argument(PRINT_CONFIG, action="store_true",
+                        help="print the Cyclone DDS configuration of the embedded runtime (CYCLONEDDS_URI if set, "
+                             "else the loopback default) on one line and exit; a mixed graph shares it: "
+                             'export CYCLONEDDS_URI="$(taiji2 --print-cyclonedds-config)"')
     sub = parser.add_subparsers(dest="verb", metavar="<verb>", title="verbs")
     sub.required = True
     return parser, sub
@@ -125,7 +129,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0 if any(tuple(argv[: len(s)]) == s for s in _SERVICES) else 130
 
 
+#: the top-level option that prints the Cyclone DDS configuration (no verb)
+PRINT_CONFIG = "--print-cyclonedds-config"
+
+
 def _main(argv: list[str]) -> int:
+    if argv == [PRINT_CONFIG]:
+        from taiji2_runtime.cyclonedds_config import effective_cyclonedds_config
+
+        print(effective_cyclonedds_config())
+        return 0
     verb = argv[0] if argv else ""
     module_name = _module_of(verb) if verb and not verb.startswith("-") else None
     if module_name is None:

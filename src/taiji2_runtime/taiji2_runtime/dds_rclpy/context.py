@@ -19,29 +19,15 @@ from cyclonedds.core import DDSException, Policy, Qos
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.topic import Topic
 
+# the default configuration lives in a module of its own (standard library only): `taiji2
+# --print-cyclonedds-config` prints it on a ROS 2 machine without the cyclonedds Python package
+from taiji2_runtime.cyclonedds_config import DEFAULT_CYCLONEDDS_CONFIG, MAX_PARTICIPANTS_PER_HOST  # noqa: F401
+
 from .arguments import RosArguments, parse_ros_args
 from .exceptions import DdsUnavailableError, NotInitializedException
 
 #: Shutdown reason prefix when a node turned out to duplicate another node's name.
 DUPLICATE_NODE_NAME = "duplicate node name"
-
-#: Highest participant index probed by unicast discovery (participants per host).
-MAX_PARTICIPANTS_PER_HOST = 60
-
-DEFAULT_CYCLONEDDS_CONFIG = f"""<CycloneDDS><Domain Id="any">
-  <General>
-    <Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>
-    <AllowMulticast>false</AllowMulticast>
-  </General>
-  <Discovery>
-    <ParticipantIndex>auto</ParticipantIndex>
-    <MaxAutoParticipantIndex>{MAX_PARTICIPANTS_PER_HOST}</MaxAutoParticipantIndex>
-    <Peers><Peer address="127.0.0.1"/></Peers>
-  </Discovery>
-  <Internal>
-    <Watermarks><WhcHigh>32kB</WhcHigh></Watermarks>
-  </Internal>
-</Domain></CycloneDDS>"""
 
 _ALIVE = 16  # DDS_IST_ALIVE
 _domains: dict[int, Domain] = {}
