@@ -1,0 +1,152 @@
+"""Time-tagged commanding: ECSS PUS service 11 (time-based scheduling) and service 1 (verification) packets.
+
+* ``TC[11,4]`` *insert activities into the time-based schedule* (ECSS-E-ST-70-41C 6.11.5.4), packed
+  and checked by spacepackets' ``PusTc`` on APID 0x140: application data = N (uint16), then N
+  instructions, each the release time as an 8-octet CUC field with P-field (onboard time,
+  :mod:`.cuc`) followed by the request: a whole torque TC ``TC[130,1]`` (:mod:`.telecommand`, its
+  own execution time = the release time). No sub-schedule or group identifiers (mission option).
+* The onboard executor's verification reports, ``TM[1,1]`` acceptance success, ``TM[1,7]``
+  completion success (every activity inserted) and ``TM[1,8]`` completion failure (failure notice:
+  code :data:`FAILURE_LATE` or :data:`FAILURE_CAPACITY`, 1 octet, then the number of activities
+  refused, uint16), are spacepackets ``Service1Tm`` packets of APID :data:`REPORT_APID`, with the
+  8-octet CUC onboard time as their PUS-C time field.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+from spacepackets.ecss.fields import PacketFieldEnum
+from spacepackets.ecss.pus_1_verification import (
+    FailureNotice,
+    ManagedParamsVerification,
+    Service1Tm,
+    VerificationParams,
+)
+from spacepackets.ecss.req_id import RequestId
+from spacepackets.ecss.tc import InvalidTcCrc16Error, PusTc
+from spacepackets.ecss.tm import ManagedParams
+from spacepackets.exceptions import BytesTooShortError
+
+from .cuc import CucError, cuc_pack, cuc_unpack_ns
+from .definition import TC_APID
+from .packetize import SEQ_MODULO, PacketError
+from .telecommand import TC_PACKET_OCTETS, TorqueCommand, decode_torque_tc, encode_torque_tc
+
+__all__ = ["FAILURE_CAPACITY", "FAILURE_LATE", "MAX_ACTIVITIES_PER_TC", "REPORT_APID", "Activity",
+           "VerificationReport", "decode_insert_activities", "decode_report", "encode_insert_activities",
+           "encode_report"]
+
+SCHEDULING_SERVICE = 11
+INSERT_ACTIVITIES = 4
+#: APID of the onboard command executor's telemetry (PUS service 1 reports)
+REPORT_APID = 0x141
+FAILURE_LATE = 1  # an activity's release time was before its arrival plus the time margin
+FAILURE_CAPACITY = 2  # the onboard schedule was full
+#: instructions per TC[11,4]: 8 + 69 octets each, a packet of at most ~4 kB
+MAX_ACTIVITIES_PER_TC = 50
+_INSTRUCTION_OCTETS = 8 + TC_PACKET_OCTETS
+
+
+@dataclass(frozen=True)
+class Activity:
+    """One time-tagged torque command: released onboard at ``release_ns`` [onboard ns]."""
+
+    release_ns: int
+    torque_n_m: tuple[float, float, float]
+    force_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+def encode_insert_activities(seq_count: int, activities: list[Activity], first_request_seq: int = 0) -> bytes:
+    """The TC[11,4] of ``activities`` (at most :data:`MAX_ACTIVITIES_PER_TC`)."""
+    if not 0 < len(activities) <= MAX_ACTIVITIES_PER_TC:
+        raise ValueError(f"TC[11,4]: 1..{MAX_ACTIVITIES_PER_TC} activities, got {len(activities)}")
+    parts = [struct.pack(">H", len(activities))]
+    for k, a in enumerate(activities):
+        parts.append(cuc_pack(a.release_ns))
+        parts.append(encode_torque_tc(first_request_seq + k, a.release_ns, np.asarray(a.torque_n_m),
+                                      np.asarray(a.force_n)))
+    tc = PusTc(service=SCHEDULING_SERVICE, message_subtype=INSERT_ACTIVITIES, apid=TC_APID,
+               app_data=b"".join(parts), seq_count=seq_count % SEQ_MODULO)
+    return bytes(tc.pack())
+
+
+def decode_insert_activities(packet: bytes) -> tuple[PusTc, list[TorqueCommand]]:
+    """The PusTc and its activities (each a :class:`TorqueCommand` whose execution time is its release time).
+
+    Raises
+    ------
+    PacketError
+        ``crc_error``, ``truncated``, ``unknown_apid`` (not TC[11,4] of APID 0x140), ``wrong_length``,
+        ``bad_time_field``.
+    """
+    try:
+        tc = PusTc.unpack(bytes(packet))
+    except InvalidTcCrc16Error as exc:
+        raise PacketError("crc_error", f"telecommand: {exc}") from None
+    except BytesTooShortError as exc:
+        raise PacketError("truncated", f"telecommand: {exc}") from None
+    if tc.apid != TC_APID or tc.service != SCHEDULING_SERVICE or tc.message_subtype != INSERT_ACTIVITIES:
+        raise PacketError("unknown_apid", f"telecommand APID 0x{tc.apid:03X} service {tc.service},{tc.message_subtype}"
+                                          " is not TC[11,4]")
+    data = tc.app_data
+    n = struct.unpack(">H", data[:2])[0] if len(data) >= 2 else -1
+    if n < 1 or len(data) != 2 + n * _INSTRUCTION_OCTETS:
+        raise PacketError("wrong_length", f"TC[11,4] with {len(data)} octets of application data for N = {n}")
+    out = []
+    for k in range(n):
+        start = 2 + k * _INSTRUCTION_OCTETS
+        try:
+            release = cuc_unpack_ns(data[start:start + 8])
+        except CucError as exc:
+            raise PacketError("bad_time_field", str(exc)) from None
+        command = decode_torque_tc(data[start + 8:start + _INSTRUCTION_OCTETS])
+        out.append(TorqueCommand(command.seq_count, release, command.torque_n_m, command.force_n))
+    return tc, out
+
+
+@dataclass(frozen=True)
+class VerificationReport:
+    """A decoded TM[1,x]: subtype (1 acceptance, 7 completion success, 8 completion failure), the TC's
+    sequence count, the report's onboard time, and for a failure its code and activities refused."""
+
+    subtype: int
+    tc_seq_count: int
+    onboard_ns: int
+    failure_code: int = 0
+    refused: int = 0
+
+
+def encode_report(subtype: int, tc: PusTc, onboard_ns: int, seq_count: int, failure_code: int = 0,
+                  refused: int = 0) -> bytes:
+    """The TM[1,subtype] (1, 7 or 8) reporting on ``tc`` at onboard time ``onboard_ns``."""
+    if subtype not in (1, 7, 8):
+        raise ValueError(f"verification report subtype {subtype}: 1, 7 or 8")
+    notice = (FailureNotice(PacketFieldEnum.with_byte_size(1, failure_code), struct.pack(">H", refused))
+              if subtype == 8 else None)
+    params = VerificationParams(RequestId.from_sp_header(tc.sp_header), failure_notice=notice)
+    tm = Service1Tm(REPORT_APID, subtype, cuc_pack(onboard_ns), params, seq_count=seq_count % SEQ_MODULO)
+    return bytes(tm.pack())
+
+
+def decode_report(packet: bytes) -> VerificationReport:
+    """Decode a TM[1,1|7|8] of :func:`encode_report`.
+
+    Raises
+    ------
+    PacketError
+        If it is not one (``unknown_apid``) or fails its CRC (``crc_error``).
+    """
+    try:
+        tm = Service1Tm.unpack(bytes(packet), ManagedParams(timestamp_len=8),
+                               ManagedParamsVerification(bytes_err_code=1))
+    except Exception as exc:  # spacepackets raises several types for a damaged or foreign packet
+        raise PacketError("unknown_apid", f"not a verification report: {exc}") from None
+    if tm.sp_header.apid != REPORT_APID:
+        raise PacketError("unknown_apid", f"APID 0x{tm.sp_header.apid:03X}")
+    notice = tm.failure_notice
+    return VerificationReport(int(tm.message_subtype), tm.tc_req_id.tc_psc.seq_count, cuc_unpack_ns(tm.timestamp),
+                              0 if notice is None else int(notice.code.val),
+                              0 if notice is None else struct.unpack(">H", notice.data)[0])
