@@ -212,6 +212,9 @@ class EstimatorNode(rclpy.node.Node):
             self.data_gap_s = (t_ns - self.resumed_from_ns) / 1e9
             self.get_logger().info(f"first data beyond the checkpoint at t = {t_ns / 1e9:.1f} s: data gap "
                                    f"{self.data_gap_s:.1f} s")
+        if self.assembler.first_ns < 0:
+            self.get_logger().info(f"first raw sample received: {stream} at t = {t_ns / 1e9:.1f} s (missing samples "
+                                   "are counted from here; samples published before this node subscribed are not)")
         for epoch in self.assembler.add(stream, t_ns, payload):
             self._process_epoch(epoch)
 
