@@ -1,7 +1,7 @@
 """``taiji2 experiment --link MODEL``: the experiment through the space link (docs/link.md).
 
-Onboard (namespace ``/onboard``): spacecraft_sim on the onboard bus, the onboard command source, the
-telemetry packetizer. Between: space_link. Ground (``/ground``): the ground receiver, both
+Onboard (namespace ``/onboard``): spacecraft_sim on the onboard bus, the onboard command executor (PUS 11), the
+telemetry packetizer. Between: space_link. Ground (``/ground``): the command planner, the ground receiver, both
 estimators (on the contract topics the receiver publishes) and, with ``--record``, the recorder of
 the ground side. Reports per stream what the link did (generated, delivered, lost, duplicated,
 reordered, overwritten, latency), what the ground received, the link faults, and for each
@@ -60,6 +60,9 @@ class LinkMonitor:
         node.create_subscription(s, "/ground/link/reception", lambda m: self.reception.append(json.loads(m.data)),
                                  keep_all)
         node.create_subscription(s, "/taiji2/sim/link_report", self._on_report, latched)
+        self.plan: list[dict[str, Any]] | None = None
+        node.create_subscription(s, "/ground/commanding/plan", lambda m: setattr(self, "plan", json.loads(m.data)),
+                                 latched)
         node.create_subscription(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", self._on_diag, 100)
 
     def _watch(self, node: Any, cls: type, topic: str, qos: Any, record: bool = False) -> None:
@@ -123,6 +126,32 @@ def requirement_times(history: dict[str, list[tuple[int, list[float], list[float
     return out
 
 
+def earliest_maneuver_start_s(model: Any) -> float:
+    """The first time a command table uplinked in the first pass can be executed, rounded up to 10 s."""
+    import math
+
+    if model.contacts.always and model.light_time_s == 0 and math.isinf(model.uplink_rate_bps):
+        return 0.0
+    first = next(model.contacts.passes())[1] if not model.contacts.always else 0.0
+    transmit = 0.0 if math.isinf(model.uplink_rate_bps) else 8.0 * 77 * model.onboard_schedule_capacity / \
+        model.uplink_rate_bps
+    return float(math.ceil((max(first, 0.0) + model.light_time_s + transmit + model.command_lead_s) / 10.0) * 10.0)
+
+
+def commanding_summary(plan: list[dict[str, Any]] | None, reports: list[dict[str, Any]]) -> dict[str, Any]:
+    """Tables planned, acknowledged onboard (TM[1,1]), completed (TM[1,7]), refused activities (TM[1,8]) and
+    tables never acknowledged (lost on the uplink), from the plan and the reports the ground received."""
+    accepted = {r["tc_seq"]: r for r in reports if r["subtype"] == 1}
+    failed = {r["tc_seq"]: r for r in reports if r["subtype"] == 8}
+    tables = plan or []
+    return {"tables": len(tables), "activities": sum(t["activities"] for t in tables),
+            "acknowledged": len(accepted), "completed": sum(1 for r in reports if r["subtype"] == 7),
+            "refused_activities": sum(r["refused"] for r in failed.values()),
+            "refused_late_tables": sorted(k for k, r in failed.items() if r["failure_code"] == 1),
+            "lost_on_uplink": sorted(t["tc_seq"] for t in tables if t["tc_seq"] not in accepted),
+            "first_ack_ground_s": min((r["ground_s"] for r in accepted.values()), default=None)}
+
+
 def pass_of(ground_time_s: float | None, model: Any) -> int | None:
     """Index of the pass a ground time falls in (or the last one before it)."""
     if ground_time_s is None or model.contacts.always:
@@ -156,6 +185,11 @@ def format_link_report(link: dict[str, Any]) -> str:
         where = "" if r["pass"] is None else f" (pass {r['pass']})"
         lines.append(f"  GRS{r['grs']} {r['parameter']:9} ({r['requirement']}): onboard {r['onboard_time_s']:10.1f} s"
                      f" -> ground {r['ground_time_s']:10.1f} s{where}")
+    c = link.get("commanding")
+    if c:
+        lines.append(f"Commanding (PUS 11): {c['tables']} TC[11,4] with {c['activities']} activities; acknowledged "
+                     f"{c['acknowledged']}, completed {c['completed']}, activities refused onboard "
+                     f"{c['refused_activities']}, lost on uplink {len(c['lost_on_uplink'])}")
     faults = link["faults"]
     lines.append("Link faults: " + ("; ".join(f"{k}: {v}" for k, v in faults.items()) if faults else "none"))
     return "\n".join(lines)
@@ -194,6 +228,14 @@ def run_link_experiment(args: argparse.Namespace) -> int:
     est_args = ["--ros-args", "-r", "__ns:=/ground", "-p", f"layout:={args.config or args.layout}",
                 "-p", f"method:={args.method}"]
     commander_maneuver = [f"maneuver_file:={Path(args.maneuver).resolve()}"] if args.maneuver else []
+    start_s = earliest_maneuver_start_s(model)
+    if start_s > 0:
+        print(f"experiment: the maneuver starts at {start_s:g} s, when the first command table can be onboard "
+              f"(pass start + light time + uplink of a full table + time margin)", file=sys.stderr)
+    if start_s >= duration_s:
+        print(f"error: taiji2 experiment: --duration-s {duration_s:g} ends before the first command table can be "
+              f"onboard ({start_s:g} s)", file=sys.stderr)
+        return 2
     commands = {
         "scale_factor_estimator": ["run", "taiji2_estimator_pkg", "scale_factor_estimator", *est_args],
         "com_offset_estimator": ["run", "taiji2_estimator_pkg", "com_offset_estimator", *est_args],
@@ -202,10 +244,16 @@ def run_link_experiment(args: argparse.Namespace) -> int:
                        "-p", f"seed:={link_seed}", "-p", f"missed_contacts:={[*missed, -1]}",
                        "-p", f"lost_uplinks:={[*lost_up, -1]}"],
         "telemetry_packetizer": ["run", "taiji2_sim_pkg", "telemetry_packetizer", "--ros-args", "-r",
-                                 "__ns:=/onboard", "-p", f"end_of_data_s:={duration_s}"],
-        "maneuver_commander": ["run", "taiji2_sim_pkg", "maneuver_commander", "--ros-args", "-r", "__ns:=/onboard",
-                               *onboard_remaps, "-p", f"preset:={args.layout}", "-p", "use_sim_time:=true",
-                               "-p", "lookahead_s:=2.0", *[a for p in commander_maneuver for a in ("-p", p)]],
+                                 "__ns:=/onboard", "-p", f"end_of_data_s:={duration_s}",
+                                 "-p", "command_reports:=true"],
+        "onboard_executor": ["run", "taiji2_sim_pkg", "onboard_executor", "--ros-args", "-r", "__ns:=/onboard",
+                             "-p", "use_sim_time:=true", "-p", "lookahead_s:=2.0",
+                             "-p", f"schedule_capacity:={model.onboard_schedule_capacity}",
+                             "-p", f"time_margin_s:={model.command_lead_s}"],
+        "command_planner": ["run", "taiji2_sim_pkg", "command_planner", "--ros-args", "-r", "__ns:=/ground",
+                            "-p", f"preset:={args.layout}", "-p", f"link_model:={args.link}",
+                            "-p", f"start_s:={start_s}", "-p", f"duration_s:={duration_s - start_s}",
+                            *[a for p in commander_maneuver for a in ("-p", p)]],
         "spacecraft_sim": ["run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard",
                            *onboard_remaps, *source, "-p", f"seed:={args.seed}", "-p", f"duration_s:={duration_s}",
                            "-p", "wait_for_subscribers:=[1, 1, 1]", "-p", "config_overrides:=" + json.dumps(overrides)],
@@ -265,6 +313,11 @@ def run_link_experiment(args: argparse.Namespace) -> int:
                 "memory_peak_octets": report["memory_peak_octets"], "uplink": report["uplink"],
                 "final_ground_time_s": final["ground_time_s"], "wall_s": elapsed,
                 "speed_x_real_time": duration_s / elapsed}
+        link["commanding"] = commanding_summary(monitor.plan, [r for rec in monitor.reception
+                                                               for r in rec.get("command_reports", [])])
+        if link["commanding"]["lost_on_uplink"]:
+            faults["command table lost on uplink"] = ("TC[11,4] #" + ", #".join(
+                map(str, link["commanding"]["lost_on_uplink"])) + " never acknowledged")
         results["link"] = link
         (out / "results.json").write_text(json.dumps(results, indent=2))
         if args.json:

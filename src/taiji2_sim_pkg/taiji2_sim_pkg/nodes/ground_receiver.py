@@ -6,7 +6,9 @@ the played-back data before them have arrived, gaps declared lost once the space
 transmitted-through time has passed them. Publishes what it releases on the contract topics
 (``/taiji2/star_tracker``, ``/taiji2/grs{1,2}/voltages``, ``/taiji2/maneuver/command`` from the
 executed-torque packets; header stamp = onboard time through the time correlation) in stamp order,
-so the estimators, the recorder and ``taiji2 calibrate`` get in-order data with gaps. After each
+so the estimators, the recorder and ``taiji2 calibrate`` get in-order data with gaps. The onboard
+executor's verification reports (APID 0x141, PUS TM[1,x]) are decoded, deduplicated and passed on in
+the reception record (``command_reports``). After each
 burst it publishes on ``/ground/link/reception`` (JSON) the ground time, the onboard time through
 which each stream has been released and the counts (received, released, duplicate, out_of_order,
 missing, held), and the same on ``/diagnostics`` (WARN naming missing samples). Parameters:
@@ -22,7 +24,9 @@ from typing import Any
 import numpy as np
 
 from taiji2_runtime.entry import run_node
+from taiji2_runtime.packets.packetize import PacketError
 from taiji2_runtime.packets.reception import GroundReception, ReleasedSample
+from taiji2_runtime.packets.scheduling import REPORT_APID, decode_report
 from taiji2_runtime.packets.time_correlation import TimeCorrelation
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.nodes import link_topics as lt
@@ -57,6 +61,8 @@ class GroundReceiver(rclpy.node.Node):
         self._ground_ns = -1
         self._ended = False
         self._samples_out = 0
+        self._reports_seen: set[tuple[int, int]] = set()
+        self._new_reports: list[dict[str, Any]] = []
 
     def _on_burst(self, msg: Any) -> None:
         try:
@@ -65,7 +71,10 @@ class GroundReceiver(rclpy.node.Node):
             self.get_logger().error(f"burst refused: {exc}", throttle_duration_sec=10.0)
             return
         for packet, receive_ns in zip(packets, msg.times_ns, strict=True):
-            self._rx.offer(packet, int(receive_ns))
+            if lt.apid_of(packet) == REPORT_APID:
+                self._on_report(packet, int(receive_ns))
+            else:
+                self._rx.offer(packet, int(receive_ns))
         if msg.times_ns:
             self._ground_ns = max(self._ground_ns, int(msg.times_ns[-1]))
         through = int(msg.transmitted_through_ns)
@@ -74,6 +83,20 @@ class GroundReceiver(rclpy.node.Node):
             self._publish_sample(r)
         self._ended = bool(msg.end_of_data)
         self._publish_reception()
+
+    def _on_report(self, packet: bytes, receive_ns: int) -> None:
+        try:
+            r = decode_report(packet)
+        except PacketError as exc:
+            self._rx.rejected[f"report_{exc.kind}"] += 1
+            return
+        key = (r.subtype, r.tc_seq_count)
+        if key in self._reports_seen:
+            return  # a duplicate
+        self._reports_seen.add(key)
+        self._new_reports.append({"subtype": r.subtype, "tc_seq": r.tc_seq_count, "onboard_s": r.onboard_ns / _NS,
+                                  "ground_s": receive_ns / _NS, "failure_code": r.failure_code,
+                                  "refused": r.refused})
 
     def _publish_sample(self, r: ReleasedSample) -> None:
         s = r.sample
@@ -104,10 +127,12 @@ class GroundReceiver(rclpy.node.Node):
         return {"ground_time_s": self._ground_ns / _NS if self._ground_ns >= 0 else None,
                 "released_through_s": {k: (v / _NS if v >= 0 else None)
                                        for k, v in self._rx.released_through_ns().items()},
-                "counts": self._rx.counts(), "rejected": dict(self._rx.rejected), "end_of_data": self._ended}
+                "counts": self._rx.counts(), "rejected": dict(self._rx.rejected), "end_of_data": self._ended,
+                "command_reports": self._new_reports, "command_reports_total": len(self._reports_seen)}
 
     def _publish_reception(self) -> None:
         state = self.reception()
+        self._new_reports = []
         self._reception_pub.publish(messages.std_msgs.String(data=json.dumps(state)))
         d = messages.diagnostic_msgs
         missing = {k: c["missing"] for k, c in state["counts"].items() if c["missing"]}

@@ -25,6 +25,7 @@ from typing import Any
 
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.packets.definition import STREAM_BY_APID, TC_APID
+from taiji2_runtime.packets.scheduling import REPORT_APID
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.link import Downlink, Uplink, load_link_model
 from taiji2_sim_pkg.nodes import link_topics as lt
@@ -39,7 +40,7 @@ def _descriptor(description: str) -> Any:
 def _apid_name(apid: int) -> str:
     if apid in STREAM_BY_APID:
         return STREAM_BY_APID[apid].name
-    return "command_reports" if apid == TC_APID else f"apid_0x{apid:03X}"
+    return "command_reports" if apid == REPORT_APID else "telecommands" if apid == TC_APID else f"apid_0x{apid:03X}"
 
 
 class SpaceLink(rclpy.node.Node):

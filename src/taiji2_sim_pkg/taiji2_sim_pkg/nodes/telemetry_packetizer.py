@@ -43,12 +43,14 @@ class TelemetryPacketizer(rclpy.node.Node):
         self._command_margin_ns = round(_NS * self.declare_parameter("command_end_margin_s", 0.1, _descriptor(
             "at the end, the executed-command stream need only have reached end_of_data_s minus this [s] (a "
             "command stamped at or after end_of_data_s acts after the run: not telemetry of it)")).value)
+        reports = self.declare_parameter("command_reports", False, _descriptor(
+            "also take the onboard executor's report packets (/onboard/link/tm_reports) into the telemetry")).value
         t = messages.taiji2_msgs
         qos = lt.reliable_all()
         self._pending: list[tuple[int, int, int, bytes]] = []  # heap (time, stream order, n, packet)
         self._n = 0
         self._seq = [0] * len(STREAMS)
-        self._latest = [-1] * len(STREAMS)
+        self._latest = [-1] * (len(STREAMS) + bool(reports))  # the sensors, the command, the reports' horizon
         self._sent_through = -1
         self._ended = False
         self._pub = self.create_publisher(t.SpacePackets, lt.ONBOARD_TM, qos)
@@ -58,6 +60,8 @@ class TelemetryPacketizer(rclpy.node.Node):
                                      lambda m, k=k: self._on_grs(m, k), qos)
         self.create_subscription(messages.geometry_msgs.WrenchStamped, lt.onboard(STREAMS[3].topic),
                                  self._on_command, qos)
+        if reports:
+            self.create_subscription(t.SpacePackets, "/onboard/link/tm_reports", self._on_reports, qos)
 
     def _add(self, k: int, t_ns: int, values: Sequence[float]) -> None:
         beyond = self._end_ns is not None and (t_ns > self._end_ns or (k == 3 and t_ns >= self._end_ns))
@@ -72,10 +76,20 @@ class TelemetryPacketizer(rclpy.node.Node):
         heapq.heappush(self._pending, (t_ns, k, self._n, packet))
         self._flush()
 
+    def _on_reports(self, msg: Any) -> None:
+        if self._ended:
+            return
+        for packet, t_ns in zip(lt.split(msg), msg.times_ns, strict=True):
+            if self._end_ns is None or t_ns < self._end_ns:
+                self._n += 1
+                heapq.heappush(self._pending, (int(t_ns), len(STREAMS), self._n, packet))
+        self._latest[-1] = max(self._latest[-1], lt.stamp_ns(msg.header))
+        self._flush()
+
     def _flush(self) -> None:
         through = min(min(self._latest), self._end_ns if self._end_ns is not None else min(self._latest))
         end = (self._end_ns is not None and min(self._latest[:3]) >= self._end_ns
-               and self._latest[3] >= self._end_ns - self._command_margin_ns)
+               and min(self._latest[3:]) >= self._end_ns - self._command_margin_ns)
         if not end and through - self._sent_through < self._burst_ns:
             return
         if end:

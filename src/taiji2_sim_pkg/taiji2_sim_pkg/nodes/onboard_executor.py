@@ -1,0 +1,146 @@
+"""onboard_executor (onboard): the time-based schedule of ECSS PUS service 11 and the maneuver it flies.
+
+Takes the telecommands the uplink delivers (``/onboard/link/tc``; each packet with its onboard arrival
+time): each ``TC[11,4]`` inserts its activities into :class:`taiji2_sim_pkg.core.time_schedule.OnboardSchedule`
+at its arrival, which refuses an activity due before arrival + time margin (late: never executed late)
+or beyond the capacity; acceptance ``TM[1,1]`` and completion ``TM[1,7]`` / ``TM[1,8]`` (refused
+activities counted, code late or capacity) are reported in telemetry (``/onboard/link/tm_reports``,
+taken by the telemetry packetizer; APID 0x141). Releases each activity at its onboard time: on the
+onboard bus ``/onboard/taiji2/maneuver/command`` it publishes, at every tick of ``publish_rate_hz``
+up to ``lookahead_s`` ahead of the clock (time-tagged, as maneuver_commander, so the accelerated
+simulator runs in lock-step), the torque of the last activity released at or before each stamp, but
+never beyond the time through which the uplink is complete (the link's stamp): what it commands for
+a time cannot change afterwards. Parameters: ``config/onboard_executor.yaml``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from typing import Any
+
+from taiji2_runtime.entry import run_node
+from taiji2_runtime.packets.packetize import PacketError
+from taiji2_runtime.packets.scheduling import FAILURE_CAPACITY, FAILURE_LATE, decode_insert_activities, encode_report
+from taiji2_runtime.ros import messages, rclpy
+from taiji2_sim_pkg.core.time_schedule import OnboardSchedule
+from taiji2_sim_pkg.nodes import link_topics as lt
+
+_NS = 1_000_000_000
+REPORTS_TOPIC = "/onboard/link/tm_reports"
+
+
+def _descriptor(description: str) -> Any:
+    return messages.rcl_interfaces.ParameterDescriptor(description=description)
+
+
+class OnboardExecutor(rclpy.node.Node):
+    """The onboard command executor (module docstring)."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("onboard_executor", **node_kwargs)
+        dp = self.declare_parameter
+        capacity = dp("schedule_capacity", 3000, _descriptor("activities the onboard schedule holds")).value
+        margin = dp("time_margin_s", 60.0, _descriptor(
+            "an activity due within this time of its arrival is refused [s]")).value
+        rate_hz = dp("publish_rate_hz", 10.0, _descriptor("command rate on the onboard bus [Hz]")).value
+        self._lookahead_ns = round(_NS * dp("lookahead_s", 2.0, _descriptor(
+            "publish time-tagged commands this far ahead of the clock [s]")).value)
+        self._period_ns = round(_NS / rate_hz)
+        self.schedule = OnboardSchedule(capacity, margin)
+        self._horizon_ns = -1  # the uplink is complete through this onboard time
+        self._next_ns = 0
+        self._reports: list[tuple[int, bytes]] = []
+        self._report_seq = 0
+        self._tables = 0
+        self._invalid = 0
+        qos = lt.reliable_all()
+        t = messages.taiji2_msgs
+        self._cmd_pub = self.create_publisher(messages.geometry_msgs.WrenchStamped,
+                                              lt.onboard("/taiji2/maneuver/command"), qos)
+        self._report_pub = self.create_publisher(t.SpacePackets, REPORTS_TOPIC, qos)
+        self._diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(t.SpacePackets, lt.ONBOARD_TC, self._on_telecommands, qos)
+        self.create_timer(1.0 / rate_hz, self._on_tick)
+        steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
+        self._first_timer = self.create_timer(0.05, self._first_tick, clock=steady)
+        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
+
+    def _on_telecommands(self, msg: Any) -> None:
+        try:
+            packets = lt.split(msg)
+        except ValueError as exc:
+            self.get_logger().error(f"telecommand burst refused: {exc}")
+            return
+        for packet, arrival_ns in zip(packets, msg.times_ns, strict=True):
+            try:
+                tc, commands = decode_insert_activities(packet)
+            except PacketError as exc:
+                self._invalid += 1
+                self.get_logger().warn(f"telecommand refused: {exc}")
+                continue
+            arrival_ns = int(arrival_ns)
+            late, full = self.schedule.insert(arrival_ns / _NS, [(c.execute_onboard_ns / _NS, tuple(c.torque_n_m))
+                                                                 for c in commands])
+            self._tables += 1
+            self._report(encode_report(1, tc, arrival_ns, self._report_seq), arrival_ns)
+            if late or full:
+                code = FAILURE_LATE if late else FAILURE_CAPACITY
+                self._report(encode_report(8, tc, arrival_ns, self._report_seq, code, late + full), arrival_ns)
+                self.get_logger().warn(f"TC[11,4] #{tc.seq_count} arriving at {arrival_ns / _NS:.1f} s: {late} "
+                                       f"activities refused as late, {full} for capacity (never executed)")
+            else:
+                self._report(encode_report(7, tc, arrival_ns, self._report_seq), arrival_ns)
+        self._horizon_ns = max(self._horizon_ns, lt.stamp_ns(msg.header))
+
+    def _report(self, packet: bytes, t_ns: int) -> None:
+        self._reports.append((t_ns, packet))
+        self._report_seq += 1
+
+    def _first_tick(self) -> None:
+        if self._horizon_ns >= 0 and self._cmd_pub.get_subscription_count() > 0:
+            self._on_tick()
+            self._first_timer.cancel()
+
+    def _on_tick(self) -> None:
+        if self._horizon_ns < 0:
+            return  # nothing known of the uplink yet: commanding now could be contradicted later
+        until = min(self.get_clock().now().nanoseconds + self._lookahead_ns, self._horizon_ns)
+        published = -1
+        while self._next_ns <= until:
+            torque = self.schedule.torque_at(self._next_ns / _NS)
+            msg = messages.geometry_msgs.WrenchStamped()
+            lt.set_stamp(msg.header, self._next_ns)
+            msg.header.frame_id = "crf"
+            msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in torque)
+            self._cmd_pub.publish(msg)
+            published = self._next_ns
+            self._next_ns += self._period_ns
+        if published < 0:
+            return
+        ready = [r for r in self._reports if r[0] <= published]
+        self._reports = [r for r in self._reports if r[0] > published]
+        ready.sort(key=lambda r: r[0])
+        self._report_pub.publish(lt.burst([p for _, p in ready], [t for t, _ in ready], published))
+
+    def _publish_diagnostics(self) -> None:
+        d = messages.diagnostic_msgs
+        s = self.schedule
+        refused = s.refused_late + s.refused_full
+        status = d.DiagnosticStatus(name="onboard_executor", hardware_id="taiji2_onboard")
+        status.level = d.DiagnosticStatus.WARN if refused or self._invalid else d.DiagnosticStatus.OK
+        status.message = (f"{s.refused_late} activities refused as late, {s.refused_full} for capacity"
+                          if refused else "nominal")
+        values = {"tables": self._tables, "inserted": s.inserted, "refused_late": s.refused_late,
+                  "refused_full": s.refused_full, "invalid_telecommands": self._invalid,
+                  "uplink_complete_through_s": self._horizon_ns / _NS}
+        status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in values.items()]
+        self._diag_pub.publish(d.DiagnosticArray(status=[status]))
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(OnboardExecutor, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
