@@ -1,0 +1,163 @@
+"""The deep-space link (issue 23): a 24-h Type-1 run through the node graph, and G and d unbiased with link loss.
+
+Two studies:
+
+1. ``graph``: ``taiji2 experiment --link deep_space --duration-s 86400 --record BAG --json`` (one
+   pass a day, onboard playback, PUS 11 commanding), its speed against real time (goal >= 100x), and
+   the ground's final live estimate against ``taiji2 calibrate BAG`` of the ground recording
+   (goal: every G and d within 1e-6 sigma).
+2. ``mc``: Monte Carlo through the batch path with the same link model: for each seed a 3-h Type-1
+   batch simulation, its star-tracker and GRS packets through :class:`taiji2_sim_pkg.core.link.Downlink`
+   (the ``deep_space`` preset: 1 % random + 1 % bursty loss, duplicates, contacts and playback), the
+   samples the ground receives calibrated (:func:`taiji2_estimator_pkg.calibration.calibrate`, the bulk
+   path of ``taiji2 calibrate``). Goal: mean error / sigma within +-0.3 and error std / sigma in
+   [0.85, 1.15] for every G and d (the std's relative standard error over n seeds is 1/sqrt(2(n-1)):
+   10 % at 50 seeds).
+
+    python benchmarks/bench_link.py [--studies graph,mc] [--seeds 50] [--duration-s 10800]
+                                    [--graph-duration-s 86400] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from taiji2_estimator_pkg.calibration import align_streams, calibrate
+from taiji2_estimator_pkg.core.instrument import InstrumentModel
+from taiji2_sim_pkg.core.config import load_config
+from taiji2_sim_pkg.core.link import Downlink, load_link_model
+from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
+
+#: APIDs and packet sizes of the three sensor streams (docs/interfaces.md)
+SENSORS = ((0x101, 120), (0x111, 64), (0x112, 64))
+
+
+def delivered_masks(model, seed: int, n: int, dt_s: float) -> list[np.ndarray]:
+    """Which of the n samples of each sensor stream the ground receives (first copies), through the link."""
+    link = Downlink(model, seed)
+    payload = {apid: bytes(size) for apid, size in SENSORS}
+    kept = {apid: np.zeros(n, dtype=bool) for apid, _ in SENSORS}
+    out = []
+    for k in range(n):
+        t = (k + 1) * dt_s
+        for apid, _ in SENSORS:
+            link.offer(t, apid, payload[apid])
+        if k % 1000 == 999:
+            out += link.advance(t)
+    out += link.advance(n * dt_s) + link.drain()
+    for d in out:
+        if not d.duplicate:
+            kept[d.apid][round(d.generated_s / dt_s) - 1] = True
+    return [kept[apid] for apid, _ in SENSORS]
+
+
+def mc(args: argparse.Namespace) -> None:
+    config = load_config("type1", overrides={"maneuver.duration_s": args.duration_s})
+    n = round(args.duration_s * config.sample_rate_hz)
+    dt = 1.0 / config.sample_rate_hz
+    commands = maneuver_torque_commands(config, n)
+    instrument = InstrumentModel.from_layout("type1")
+    model = load_link_model("deep_space")
+    z_g, z_d, lost = [], [], []
+    started = time.monotonic()
+    for i in range(args.seeds):
+        seed = 5000 + i
+        out = simulate_batch(config, seed, commands)
+        stamps = np.rint(out.t_s * 1e9).astype(np.int64)
+        keep_st, keep_1, keep_2 = delivered_masks(model, seed, n, dt)
+        lost.append([1 - keep_st.mean(), 1 - keep_1.mean(), 1 - keep_2.mean()])
+        record = align_streams(stamps[keep_st], out.st_quat_xyzw[keep_st],
+                               {1: (stamps[keep_1], out.voltages_v[keep_1, 0]),
+                                2: (stamps[keep_2], out.voltages_v[keep_2, 1])}, instrument.sample_rate_hz)
+        table = calibrate(record, instrument).to_dict()
+        g = np.concatenate([table[f"grs{k}"]["scale_factors"] for k in (1, 2)])
+        g_sig = np.concatenate([np.sqrt(np.diag(table[f"grs{k}"]["scale_factors_cov"])) for k in (1, 2)])
+        d = np.concatenate([table[f"grs{k}"]["com_offset"] for k in (1, 2)])
+        d_sig = np.concatenate([np.sqrt(np.diag(table[f"grs{k}"]["com_offset_cov"])) for k in (1, 2)])
+        z_g.append((g - out.truth.grs_angular_scale_factors[-1].reshape(-1)) / g_sig)
+        z_d.append((d - out.truth.com_offset_m[-1].reshape(-1)) / d_sig)
+        if i % 10 == 9:
+            print(f"  {i + 1} seeds ({time.monotonic() - started:.0f} s)", file=sys.stderr)
+    z_g, z_d, lost = np.array(z_g), np.array(z_d), np.array(lost)
+    print(f"MC: Type-1 {args.duration_s:g} s, {args.seeds} seeds through the deep_space link model "
+          f"(samples lost: star tracker {100 * lost[:, 0].mean():.2f} %, GRS1 {100 * lost[:, 1].mean():.2f} %, "
+          f"GRS2 {100 * lost[:, 2].mean():.2f} %); {time.monotonic() - started:.0f} s")
+    names = [f"GRS{k} {p}" for k in (1, 2) for p in ("G_Pphi", "G_Ptheta", "G_Ppsi")]
+    names += [f"GRS{k} d_{a}" for k in (1, 2) for a in "xyz"]
+    z = np.hstack([z_g, z_d])
+    ok = True
+    for j, name in enumerate(names):
+        mean, std = z[:, j].mean(), z[:, j].std(ddof=1)
+        good = abs(mean) <= 0.3 and 0.85 <= std <= 1.15
+        ok &= good
+        print(f"  {name:14s} mean err/sigma {mean:+.3f}  std err/sigma {std:.3f}  {'ok' if good else 'MISS'}")
+    print(f"  goal (mean within +-0.3, std in [0.85, 1.15]) {'met' if ok else 'NOT met'} for every parameter")
+
+
+def graph(args: argparse.Namespace) -> None:
+    out = Path(args.out or tempfile.mkdtemp(prefix="bench-link-"))
+    bag = out / "ground_bag"
+    env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "74"))
+    cmd = [sys.executable, "-m", "taiji2_runtime.cli.main", "experiment", "--link", "deep_space", "--layout", "type1",
+           "--duration-s", str(args.graph_duration_s), "--record", str(bag), "--out", str(out / "run"), "--json",
+           "--timeout-s", "20000"]
+    started = time.monotonic()
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    wall = time.monotonic() - started
+    if proc.returncode != 0:
+        print(proc.stderr[-3000:])
+        raise SystemExit(f"experiment failed ({proc.returncode})")
+    live = json.loads(proc.stdout.strip().splitlines()[-1])
+    link = live["link"]
+    print(f"graph: Type-1 {args.graph_duration_s:g} s through deep_space: {wall:.0f} s wall including start-up "
+          f"({args.graph_duration_s / wall:.0f}x real time), the run itself {link['wall_s']:.0f} s "
+          f"({link['speed_x_real_time']:.0f}x); goal >= 100x")
+    for r in link["requirements"]:
+        print(f"  GRS{r['grs']} {r['parameter']}: onboard {r['onboard_time_s']} s -> ground {r['ground_time_s']} s "
+              f"(pass {r['pass']})")
+    off = subprocess.run([sys.executable, "-m", "taiji2_runtime.cli.main", "calibrate", str(bag), "--json"],
+                         capture_output=True, text=True, env=env)
+    if off.returncode != 0:
+        print(off.stderr[-2000:])
+        raise SystemExit("calibrate failed")
+    offline = json.loads(off.stdout)
+    worst = 0.0
+    for k in (1, 2):
+        for key, cov in (("scale_factors", "scale_factors_cov"), ("com_offset", "com_offset_cov")):
+            a, b = np.array(live[f"grs{k}"][key]), np.array(offline[f"grs{k}"][key])
+            sigma = np.sqrt(np.diag(np.array(offline[f"grs{k}"][cov])))
+            dev = np.abs(a - b) / sigma
+            worst = max(worst, float(np.nanmax(dev)))
+            print(f"  GRS{k} {key}: |live - offline| / sigma = {np.array2string(dev, precision=2)}")
+    print(f"  live ground estimate vs taiji2 calibrate of the ground bag: worst {worst:.2e} sigma (goal <= 1e-6)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--studies", default="graph,mc")
+    parser.add_argument("--seeds", type=int, default=50)
+    parser.add_argument("--duration-s", type=float, default=10800.0, help="MC record length [s]")
+    parser.add_argument("--graph-duration-s", type=float, default=86400.0)
+    parser.add_argument("--out", default="")
+    args = parser.parse_args()
+    from taiji2_runtime.threads import limit_blas_threads
+
+    limit_blas_threads()
+    studies = args.studies.split(",")
+    if "mc" in studies:
+        mc(args)
+    if "graph" in studies:
+        graph(args)
+
+
+if __name__ == "__main__":
+    main()
