@@ -28,6 +28,8 @@ from .link import LinkModel
 
 __all__ = ["OnboardSchedule", "PlanError", "UplinkTable", "maneuver_activities", "plan_uplinks"]
 
+#: a release this close after a time counts as at it [s] (one CUC count, 2**-24 s)
+RELEASE_TOLERANCE_S = 2.0**-24
 #: octets one activity takes in a TC[11,4] (release time 8 + torque TC 69)
 ACTIVITY_OCTETS = 77
 
@@ -152,6 +154,9 @@ class OnboardSchedule:
         return late, full
 
     def torque_at(self, t_s: float) -> np.ndarray:
-        """Torque in effect at ``t_s`` [N m] (the last activity released at or before it; zero before any)."""
-        j = bisect.bisect_right(self._release, t_s + 1e-9)
+        """Torque in effect at ``t_s`` [N m] (the last activity released at or before it; zero before any).
+
+        A release within :data:`RELEASE_TOLERANCE_S` after ``t_s`` counts as at it: release times travel as
+        CUC times (2**-24 s counts), so a release on the command grid comes back up to 30 ns off it."""
+        j = bisect.bisect_right(self._release, t_s + RELEASE_TOLERANCE_S)
         return np.array(self._torque[j - 1]) if j else np.zeros(3)
