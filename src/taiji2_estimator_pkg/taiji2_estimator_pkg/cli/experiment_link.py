@@ -126,6 +126,21 @@ def requirement_times(history: dict[str, list[tuple[int, list[float], list[float
     return out
 
 
+def _maneuver_file(choice: str, layout: str) -> str:
+    """The maneuver file the planner flies: ``paper`` or empty: none (the layout's square wave); ``design``:
+    the layout's shipped design (config/maneuvers/LAYOUT.yaml) where there is one; else the path given."""
+    if choice in ("", "paper"):
+        return ""
+    if choice == "design":
+        from taiji2_sim_pkg.core.config import _config_dirs
+
+        for directory in _config_dirs():
+            if (directory / "maneuvers" / f"{layout}.yaml").is_file():
+                return str(directory / "maneuvers" / f"{layout}.yaml")
+        return ""
+    return str(Path(choice).resolve())
+
+
 def earliest_maneuver_start_s(model: Any) -> float:
     """The first time a command table uplinked in the first pass can be executed, rounded up to 10 s."""
     import math
@@ -227,7 +242,8 @@ def run_link_experiment(args: argparse.Namespace) -> int:
         onboard_remaps += ["-r", f"{topic}:=/onboard{topic}"]
     est_args = ["--ros-args", "-r", "__ns:=/ground", "-p", f"layout:={args.config or args.layout}",
                 "-p", f"method:={args.method}"]
-    commander_maneuver = [f"maneuver_file:={Path(args.maneuver).resolve()}"] if args.maneuver else []
+    maneuver_file = _maneuver_file(getattr(args, "maneuver", None) or "", args.layout)
+    commander_maneuver = [f"maneuver_file:={maneuver_file}"] if maneuver_file else []
     start_s = earliest_maneuver_start_s(model)
     if start_s > 0:
         print(f"experiment: the maneuver starts at {start_s:g} s, when the first command table can be onboard "
