@@ -31,6 +31,8 @@ from taiji2_sim_pkg.core.link import Downlink, Uplink, load_link_model
 from taiji2_sim_pkg.nodes import link_topics as lt
 
 _NS = 1_000_000_000
+#: packets per published burst at most
+MAX_BURST_PACKETS = 4096
 
 
 def _descriptor(description: str) -> Any:
@@ -102,11 +104,17 @@ class SpaceLink(rclpy.node.Node):
             self._deliver(self.downlink.advance(through_ns / _NS), through_ns + self._lt_ns)
 
     def _deliver(self, deliveries: list[Any], complete_through_ns: int, end: bool = False) -> None:
+        """Publish ``deliveries`` in bursts of at most :data:`MAX_BURST_PACKETS` (a playback after the end of
+        the data is days of telemetry): each complete through the next one's first reception."""
         if not deliveries and not end:
             return
-        through = round(deliveries[-1].transmitted_through_s * _NS) if deliveries else -1
-        self._ground_tm.publish(lt.burst([d.packet for d in deliveries], [round(d.receive_s * _NS) for d in deliveries],
-                                         complete_through_ns, transmitted_through_ns=through, end_of_data=end))
+        chunks = [deliveries[i:i + MAX_BURST_PACKETS] for i in range(0, len(deliveries), MAX_BURST_PACKETS)] or [[]]
+        for j, chunk in enumerate(chunks):
+            last = j == len(chunks) - 1
+            through = round(chunk[-1].transmitted_through_s * _NS) if chunk else -1
+            complete = complete_through_ns if last else round(chunks[j + 1][0].receive_s * _NS)
+            self._ground_tm.publish(lt.burst([d.packet for d in chunk], [round(d.receive_s * _NS) for d in chunk],
+                                             complete, transmitted_through_ns=through, end_of_data=end and last))
 
     # -- uplink ----------------------------------------------------------------------------------------
     def _on_telecommands(self, msg: Any) -> None:
