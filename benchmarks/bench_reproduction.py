@@ -43,10 +43,10 @@ AXES = ("x", "y", "z")
 
 def run_graph(layout: str, method: str, duration_s: float, seed: int) -> dict:
     cmd = [sys.executable, "-m", "taiji2_runtime.cli.main", "experiment", "--layout", layout, "--method", method,
-           "--duration-s", str(duration_s), "--seed", str(seed), "--json"]
+           "--maneuver", "paper", "--duration-s", str(duration_s), "--seed", str(seed), "--json"]
     started = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=6 * 3600)
-    if proc.returncode != 0:
+    if proc.returncode not in (0, 3):  # 3: complete, not every requirement met (the paper's preset on d)
         raise SystemExit(f"experiment {layout} {method} failed:\n{proc.stderr[-2000:]}")
     result = json.loads(proc.stdout.strip().splitlines()[-1])
     result["wall_s"] = time.perf_counter() - started

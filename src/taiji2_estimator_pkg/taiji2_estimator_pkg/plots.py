@@ -11,6 +11,7 @@ No middleware; matplotlib with the Agg backend.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,12 +32,18 @@ G_NAMES = (r"$G_{P\phi}$", r"$G_{P\theta}$", r"$G_{P\psi}$")
 
 
 def running_estimates(t_s: np.ndarray, quat_xyzw: np.ndarray, voltages_v: np.ndarray, instrument: InstrumentModel,
-                      every_s: float = 30.0) -> dict[str, np.ndarray]:
-    """Per-sample default-method estimates recorded every ``every_s`` of data (as the nodes publish them)."""
+                      every_s: float = 30.0, progress: Callable[[int, int], None] | None = None,
+                      ) -> dict[str, np.ndarray]:
+    """Per-sample default-method estimates recorded every ``every_s`` of data (as the nodes publish them).
+
+    ``progress(k, n)`` is called after every recorded estimate (k samples of n done).
+    """
     sf, co = ScaleFactorEstimator(instrument, (1, 2)), ComOffsetEstimator(instrument, (1, 2))
     step = max(1, round(every_s * instrument.sample_rate_hz))
     times, g, g_sig, d, d_sig = [], [], [], [], []
     for k in range(t_s.size):
+        if progress is not None and k % step == 0:
+            progress(k, t_s.size)
         volts = {1: voltages_v[k, 0], 2: voltages_v[k, 1]}
         sf.update(t_s[k], quat_xyzw[k], volts)
         co.update(t_s[k], volts)

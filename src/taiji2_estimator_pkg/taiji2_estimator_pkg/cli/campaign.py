@@ -18,7 +18,7 @@ from pathlib import Path
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("target", help="campaign spec YAML, or the word 'summarize'")
     parser.add_argument("directory", nargs="?", default="", help="with 'summarize': the campaign directory")
-    parser.add_argument("--out", default="", help="campaign directory (default: campaigns_out/<spec name>)")
+    parser.add_argument("--out", default="", help="campaign directory (default: taiji2_out/campaigns/<spec name>)")
     parser.add_argument("--scheduler", default="", help="existing Dask scheduler, e.g. tcp://host:8786")
     parser.add_argument("--workers", type=int, default=0, help="worker processes of the embedded cluster "
                                                                "(default: one per core)")
@@ -38,7 +38,7 @@ def main(args: argparse.Namespace) -> int:
     from taiji2_estimator_pkg.campaign.spec import load_spec
 
     spec = load_spec(args.target)
-    out = Path(args.out or Path("campaigns_out") / spec["name"])
+    out = Path(args.out or Path("taiji2_out") / "campaigns" / spec["name"])
     try:
         run = run_campaign(spec, out, scheduler=args.scheduler or None, workers=args.workers or None)
     except KeyboardInterrupt:

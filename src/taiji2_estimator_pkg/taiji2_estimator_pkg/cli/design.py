@@ -37,7 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="shortest duration with every requirement met at 1 sigma")
     parser.add_argument("--family", default="square", choices=("square", "multisine", "piecewise"),
                         help="maneuver family (default square)")
-    parser.add_argument("--out", default="design", help="output directory (default ./design)")
+    parser.add_argument("--out", default="",
+                        help="output directory (default taiji2_out/design-LAYOUT, LAYOUT the --layout or the "
+                             "--config file's name)")
     parser.add_argument("--range-margin", type=float, default=0.9,
                         help="allowed peak maneuver-induced linear acceleration / GRS range (default 0.9)")
     parser.add_argument("--max-attitude-rad", type=float, default=0.01,
@@ -181,7 +183,7 @@ def main(args: argparse.Namespace) -> int:
             if np.max(final_ratios) <= 1.0:
                 break
             target *= float(np.max(final_ratios)) ** 2 * 1.01
-    out = Path(args.out)
+    out = Path(args.out or f"taiji2_out/design-{Path(args.config).stem if args.config else args.layout}")
     out.mkdir(parents=True, exist_ok=True)
     maneuver_path = out / "maneuver.yaml"
     save_maneuver_file(maneuver_path, final_maneuver,

@@ -34,8 +34,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default="",
                         help="nominal model: simulator config YAML (instead of --layout); its timing section "
                              "states the data's timing conventions (docs/interfaces.md)")
-    parser.add_argument("--out", default="diagnosis", help="output directory for report.md, report.json, plots "
-                                                           "(default ./diagnosis)")
+    parser.add_argument("--out", default="taiji2_out/diagnosis",
+                        help="output directory for report.md, report.json, plots (default taiji2_out/diagnosis)")
     parser.add_argument("--json", action="store_true", help="print report.json to stdout")
     parser.add_argument("--candidates", default="", help="comma-separated effect families to consider (default all)")
     parser.add_argument("--exclude", default="", help="comma-separated effect families to leave out")
@@ -82,6 +82,11 @@ def _load_bag(path: Path, sample_rate_hz: float, correlation: Any = None) -> Any
     return inp
 
 
+def _share(value: float | None) -> str:
+    """A shrink (docs/diagnosis.md section 6) as a percentage."""
+    return "-" if value is None else f"{100 * value:.0f} %"
+
+
 def main(args: argparse.Namespace) -> int:
     """Run the diagnosis; returns the exit status."""
     from taiji2_runtime.threads import limit_blas_threads
@@ -110,7 +115,7 @@ def main(args: argparse.Namespace) -> int:
     options = DiagnosisOptions(**overrides)
     path = Path(args.bag)
     if not path.exists():
-        raise ValueError(f"{path}: no such file or directory")
+        raise ValueError(f"{path}: no such bag (the path does not exist)")
     progress(f"reading {path}")
     if path.suffix == ".npz":
         inp = _load_npz(path, config.sample_rate_hz)
@@ -131,8 +136,8 @@ def main(args: argparse.Namespace) -> int:
         for effect in result.effects:
             if effect.accepted:
                 print(f"  {effect.key}: {effect.magnitude:.4g} +- {effect.sigma:.2g} {effect.unit}; shrink "
-                      f"{effect.shrink if effect.shrink is None else round(effect.shrink, 3)}, held-out shrink "
-                      f"{effect.shrink_heldout if effect.shrink_heldout is None else round(effect.shrink_heldout, 3)}"
+                      f"{_share(effect.shrink)} (the part of the gap at its locations that it closes; held-out "
+                      f"data: {_share(effect.shrink_heldout)})"
                       + (f"; aliases {', '.join(effect.aliases)}" if effect.aliases else ""))
         print(f"report: {files['report.md']}")
     return _INSUFFICIENT if result.status != "ok" else 0

@@ -51,6 +51,42 @@ def _effect(text: str) -> dict[str, Any]:
     return spec
 
 
+def _checked_effect(spec: dict[str, Any]) -> tuple[Any, list[str]]:
+    """The catalog effect of an ``--effect`` spec, and notes on what was assumed.
+
+    An unknown parameter is refused with the effect's valid keys; the notes name the defaults taken
+    for parameters not given, say when the effect is inactive with these values (it changes
+    nothing), and what a negative delay means.
+    """
+    import inspect
+
+    from taiji2_sim_pkg.core.effect_catalog import EFFECTS, make_effect
+
+    name, given = spec["name"], {k: v for k, v in spec.items() if k != "name"}
+    if name not in EFFECTS:
+        return make_effect(name, **given), []  # make_effect names the known effects
+    parameters = {k: p for k, p in inspect.signature(EFFECTS[name].__init__).parameters.items()
+                  if k != "self" and p.kind is p.POSITIONAL_OR_KEYWORD}
+    unknown = [k for k in given if k not in parameters]
+    if unknown:
+        raise ValueError(f"--effect {name}: unknown parameter {unknown[0]!r}; {name} takes "
+                         f"{', '.join(f'{k}={p.default!r}' for k, p in parameters.items())} (the defaults)")
+    effect = make_effect(name, **given)
+    notes = []
+    defaults = {k: p.default for k, p in parameters.items() if k not in given and k not in ("enabled", "onset_s")}
+    if defaults:
+        notes.append(f"--effect {name}: defaults used for {', '.join(f'{k}={v!r}' for k, v in defaults.items())}")
+    if not getattr(effect, "active", True):
+        notes.append(f"--effect {name}: inactive with these values (it changes nothing); give its magnitude, e.g. "
+                     f"{name}:{next(iter(parameters))}=...")
+    for key in ("delay_s", "offset_s"):
+        value = given.get(key)
+        if isinstance(value, (int, float)) and value < 0:
+            notes.append(f"--effect {name}: {key}={value}: negative, the torque acts {-value:g} s before its "
+                         "command's stamp (a command stamped late); batch simulation only")
+    return effect, notes
+
+
 def main(args: argparse.Namespace) -> int:
     """Run ``taiji2 simulate``."""
     from taiji2_runtime.threads import limit_blas_threads
@@ -61,7 +97,6 @@ def main(args: argparse.Namespace) -> int:
 
     from taiji2_estimator_pkg.io.sim_bag import write_simulated_bag
     from taiji2_sim_pkg.core.config import ConfigError, load_config
-    from taiji2_sim_pkg.core.effect_catalog import make_effect
     from taiji2_sim_pkg.core.reference import simulate_reference
     from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
@@ -74,7 +109,12 @@ def main(args: argparse.Namespace) -> int:
             overrides[key.strip()] = yaml.safe_load(value)
         config = load_config(args.config or args.layout, overrides)
         specs = [_effect(text) for text in args.effect]
-        effects = [make_effect(**spec) for spec in specs]
+        effects = []
+        for spec in specs:
+            effect, notes = _checked_effect(spec)
+            effects.append(effect)
+            for note in notes:
+                print(f"note: {note}", file=sys.stderr)
         if args.duration_s is not None and not args.duration_s > 0:
             raise ValueError(f"--duration-s {args.duration_s}: must be positive")
         steps = None if args.duration_s is None else round(args.duration_s * config.sample_rate_hz)
@@ -90,7 +130,7 @@ def main(args: argparse.Namespace) -> int:
         bag = write_simulated_bag(args.out, out.t_s, out.st_quat_xyzw, out.st_cov_rad2, out.voltages_v, command_t,
                                   commands, storage=args.storage, provenance=provenance)
     except (ConfigError, ValueError, TypeError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: taiji2 simulate: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
     print(json.dumps({"bag": str(bag), "samples": len(out), "fidelity": args.fidelity, "seed": args.seed,
                       "effects": specs}))

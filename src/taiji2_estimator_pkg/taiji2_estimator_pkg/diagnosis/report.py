@@ -197,7 +197,9 @@ def _plots(result: DiagnosisResult, out: Path) -> list[str]:
             if value >= float(plots["threshold"]):
                 ax.text(j, i, "*", ha="center", va="center", color="cyan", fontsize=10)
         ax.set_title(f"-log10 p by channel and band: {title}", fontsize=10)
-        figure.colorbar(image, ax=ax, fraction=0.046)
+        ax.set_xlabel("frequency band [Hz]")
+        ax.set_ylabel("channel")
+        figure.colorbar(image, ax=ax, fraction=0.046).set_label("significance of the excess, -log10 p")
     figure.suptitle(f"gap map (* above the threshold {plots['threshold']:.2f})", fontsize=11)
     figure.tight_layout(rect=(0, 0, 1, 0.95))
     figure.savefig(out / "gap_map.png", dpi=90)

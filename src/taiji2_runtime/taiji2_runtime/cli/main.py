@@ -24,6 +24,8 @@ import sys
 from collections.abc import Sequence
 from types import ModuleType
 
+from taiji2_runtime.cli import plain_text
+
 #: built-in verbs: name -> module (imported when the verb runs)
 BUILTIN_VERBS = {
     "run": "taiji2_runtime.cli.run",
@@ -68,7 +70,12 @@ def _module_of(verb: str) -> str | None:
 
 
 def _summary(module: ModuleType) -> str:
-    return (module.__doc__ or "").strip().splitlines()[0] if module.__doc__ else ""
+    return plain_text(module.__doc__.strip().splitlines()[0]) if module.__doc__ else ""
+
+
+def _description(module: ModuleType) -> str | None:
+    """The verb module's docstring without reStructuredText markup (the help a terminal shows)."""
+    return plain_text(module.__doc__) if module.__doc__ else None
 
 
 def _top_parser(verbs: dict[str, str]) -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
@@ -91,7 +98,7 @@ def build_parser(verbs: dict[str, str] | None = None) -> argparse.ArgumentParser
             module = importlib.import_module(module_name)
         except ImportError:
             continue
-        verb_parser = sub.add_parser(name, help=_summary(module), description=module.__doc__,
+        verb_parser = sub.add_parser(name, help=_summary(module), description=_description(module),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
         module.add_arguments(verb_parser)
         verb_parser.set_defaults(_module=module)
@@ -101,7 +108,7 @@ def build_parser(verbs: dict[str, str] | None = None) -> argparse.ArgumentParser
 def _verb_parser(verb: str, module: ModuleType) -> argparse.ArgumentParser:
     """A parser that knows only ``verb`` (the others are not imported)."""
     parser, sub = _top_parser({verb: module.__name__})
-    verb_parser = sub.add_parser(verb, help=_summary(module), description=module.__doc__,
+    verb_parser = sub.add_parser(verb, help=_summary(module), description=_description(module),
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     module.add_arguments(verb_parser)
     verb_parser.set_defaults(_module=module)
@@ -159,6 +166,12 @@ def _main(argv: list[str]) -> int:
     args = _verb_parser(verb, module).parse_args(argv)
     try:
         return int(args._module.main(args) or 0)
+    except BrokenPipeError:
+        # whoever read stdout stopped (taiji2 bag info BAG | head): nothing went wrong in the verb
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
+        return 0
     except (ValueError, LookupError, OSError, RuntimeError) as exc:
         _report_error(f"{_PROG} {args.verb}", exc)
         return 2

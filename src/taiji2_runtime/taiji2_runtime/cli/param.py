@@ -16,14 +16,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="param_verb", metavar="<list|get|set>")
     sub.required = True
     p_list = sub.add_parser("list", help="parameter names of a node (of every node without one)")
-    p_list.add_argument("node_name", nargs="?")
+    p_list.add_argument("node_name", nargs="?", help="node to list (default: every node)")
     p_get = sub.add_parser("get", help="a parameter's value")
-    p_get.add_argument("node_name")
-    p_get.add_argument("parameter_name")
+    p_get.add_argument("node_name", help="node, e.g. /spacecraft_sim")
+    p_get.add_argument("parameter_name", help="parameter, e.g. seed")
     p_set = sub.add_parser("set", help="set a parameter (the value is read as YAML, as ros2 param does)")
-    p_set.add_argument("node_name")
-    p_set.add_argument("parameter_name")
-    p_set.add_argument("value")
+    p_set.add_argument("node_name", help="node, e.g. /maneuver_commander")
+    p_set.add_argument("parameter_name", help="parameter, e.g. lookahead_s")
+    p_set.add_argument("value", help="new value, YAML syntax as ros2 param set (e.g. 2.0, true, [1, 2])")
     for p in (p_list, p_get, p_set):
         p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT_S, help="seconds to wait for the node")
 

@@ -13,6 +13,8 @@ import yaml
 from .exceptions import InvalidRosArgumentsException
 
 ROS_ARGS_FLAG = "--ros-args"
+#: severities --log-level accepts (rcutils)
+_LOG_LEVELS = ("DEBUG", "INFO", "WARN", "WARNING", "ERROR", "FATAL", "UNSET")
 _END_FLAG = "--"
 _IGNORED_FLAGS_WITH_VALUE = ("-e", "--enclave", "--log-config-file")
 _IGNORED_FLAGS = (
@@ -151,7 +153,12 @@ def parse_ros_args(args: Sequence[str] | None) -> RosArguments:
                 elif arg == "--params-file":
                     result.overrides.extend(load_params_file(nxt))
                 elif arg == "--log-level":
-                    result.log_level = nxt.split(":=")[-1].upper()
+                    level = nxt.split(":=")[-1].upper()
+                    if level not in _LOG_LEVELS:  # rcutils' severities (WARNING is accepted for WARN)
+                        raise InvalidRosArgumentsException(
+                            f"--ros-args: --log-level {nxt!r}: not a severity; one of "
+                            f"{', '.join(v.lower() for v in _LOG_LEVELS if v != 'WARNING')}")
+                    result.log_level = "WARN" if level == "WARNING" else level
             elif arg in _IGNORED_FLAGS:
                 pass
             else:

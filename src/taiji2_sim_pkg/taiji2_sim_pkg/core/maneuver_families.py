@@ -33,8 +33,8 @@ from numpy.typing import ArrayLike
 
 from .maneuver import AXIS_NAMES, ManeuverError, SquareWaveManeuver, thrust_per_thruster_n
 
-__all__ = ["FAMILIES", "Maneuver", "MultisineManeuver", "PiecewiseManeuver", "check_thrust", "load_maneuver_file",
-           "maneuver_from_spec", "maneuver_spec", "peak_torque_n_m", "save_maneuver_file"]
+__all__ = ["FAMILIES", "Maneuver", "MultisineManeuver", "PiecewiseManeuver", "builtin_maneuver_file", "check_thrust",
+           "load_maneuver_file", "maneuver_from_spec", "maneuver_spec", "peak_torque_n_m", "save_maneuver_file"]
 
 FAMILIES = ("square", "multisine", "piecewise")
 """Names of the maneuver families."""
@@ -214,6 +214,22 @@ def load_maneuver_file(path: str | os.PathLike[str]) -> Any:
         return maneuver_from_spec(spec)
     except ManeuverError as exc:
         raise ManeuverError(f"maneuver file {os.fspath(path)}", str(exc)) from None
+
+
+def builtin_maneuver_file(layout: str) -> str | None:
+    """The maneuver file shipped for a built-in layout (``config/maneuvers/<layout>.yaml``), or None.
+
+    These are ``taiji2 design`` results (the header of each file says which command made it); they
+    are the default maneuver of ``taiji2 experiment``. Found where the built-in layouts are: the
+    source tree, or ``share/taiji2_sim_pkg/config/maneuvers`` of a pip or colcon install.
+    """
+    from .config import _config_dirs  # the layout files' search path
+
+    for directory in _config_dirs():
+        path = directory / "maneuvers" / f"{layout}.yaml"
+        if path.is_file():
+            return str(path)
+    return None
 
 
 def save_maneuver_file(path: str | os.PathLike[str], maneuver: Any, comment: str = "") -> None:

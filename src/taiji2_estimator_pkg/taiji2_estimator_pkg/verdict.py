@@ -1,0 +1,260 @@
+"""The verdict of a calibration experiment: which requirements are met, which cannot be, and why.
+
+A requirement (G to 0.3 %, d to 100 um, 1 sigma, each of the 12 parameters of both GRS) is *met*
+when the reported 1-sigma is within it, the Cramer-Rao bound of the flown maneuver and duration
+is within it, and, where the truth is known (simulation), the error is within it. A parameter
+that is not met is put in the first of these classes that applies:
+
+* ``cannot``: its bound is beyond the requirement. No estimator reaches it with this maneuver and
+  duration; the remedy is a longer run (the bound falls as 1/sqrt(T)) or a designed maneuver
+  (``taiji2 design``).
+* ``estimator``: the bound is within, the reported 1-sigma is not.
+* ``chance``: bound and 1-sigma are within, the error of this run is not (a draw beyond the
+  requirement; another seed or a longer run).
+
+Plain data (no middleware): built from an :class:`~taiji2_estimator_pkg.report.EstimateTable`, the
+bound (:func:`taiji2_estimator_pkg.core.crlb.crlb`) and the simulator's diagnostics.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL, EstimateTable
+
+__all__ = ["ParameterCheck", "Verdict", "judge", "range_warning"]
+
+_G_NAMES = ("G_Pphi", "G_Ptheta", "G_Ppsi")
+_D_NAMES = ("d_x", "d_y", "d_z")
+#: reported 1-sigma / bound outside this interval is named (the estimators reach the bound within ~15 %)
+_SIGMA_OVER_BOUND = (0.8, 1.25)
+#: |error| / 1-sigma beyond this is named as inconsistent
+_ERROR_SIGMAS = 3.0
+
+
+@dataclass(frozen=True)
+class ParameterCheck:
+    """One of the 12 parameters, every value as a fraction of its requirement (NaN: unknown).
+
+    Attributes
+    ----------
+    name : str
+        ``grs1.G_Pphi`` ... ``grs2.d_z`` (the order of ``design.evaluate.PARAMETER_NAMES``).
+    sigma, bound, error : float
+        Reported 1-sigma, Cramer-Rao bound and error against truth, each / requirement.
+    unit_value : float
+        The requirement in display units (0.3 for G [%], 100 for d [um]).
+    unit : str
+        ``"%"`` or ``"um"``.
+    """
+
+    name: str
+    sigma: float
+    bound: float
+    error: float
+    unit_value: float
+    unit: str
+
+    @property
+    def status(self) -> str:
+        """``met``, ``cannot``, ``estimator`` or ``chance`` (see the module doc; an undetermined 1-sigma,
+        NaN, is ``estimator`` unless the bound says ``cannot``)."""
+        if self.bound > 1.0 or (np.isnan(self.bound) and self.sigma > 1.0):
+            return "cannot"
+        if not self.sigma <= 1.0:  # above the requirement, or NaN: not determined by the data
+            return "estimator"
+        if abs(self.error) > 1.0:
+            return "chance"
+        return "met"
+
+    def amount(self, fraction: float) -> str:
+        """A fraction of the requirement in display units (``148 um``, ``0.061 %``)."""
+        value = fraction * self.unit_value
+        return f"{value:.0f} um" if self.unit == "um" else f"{value:.3f} %"
+
+
+@dataclass
+class Verdict:
+    """The verdict of one experiment (see the module doc)."""
+
+    checks: list[ParameterCheck]
+    duration_s: float
+    maneuver: str
+    remedy: str = ""
+    maneuver_covers_run: bool = True
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def all_met(self) -> bool:
+        """Every requirement met."""
+        return all(c.status == "met" for c in self.checks)
+
+    def _named(self, status: str) -> list[ParameterCheck]:
+        return [c for c in self.checks if c.status == status]
+
+    def lines(self) -> list[str]:
+        """Human-readable: the verdict line, one line per reason, then the warnings."""
+        hours = f"{self.duration_s / 3600:.2f} h"
+        n, met = len(self.checks), len(self._named("met"))
+        out = []
+        if self.all_met:
+            worst = max(self.checks, key=lambda c: c.sigma)
+            text = (f"verdict: all {n} requirements met (G to 0.3 %, d to 100 um, 1 sigma, both GRS) with "
+                    f"{self.maneuver} in {hours}: largest 1-sigma {worst.name} {worst.amount(worst.sigma)} = "
+                    f"{worst.sigma:.2f} of its requirement")
+            if not np.isnan(worst.bound):
+                text += f" (the Cramer-Rao bound: {worst.bound:.2f})"
+            errors = [c for c in self.checks if not np.isnan(c.error)]
+            if errors:
+                largest = max(errors, key=lambda c: abs(c.error))
+                text += f"; largest error {largest.name} {largest.amount(abs(largest.error))}"
+            out.append(text)
+        else:
+            missed = [c.name for c in self.checks if c.status != "met"]
+            out.append(f"verdict: {met} of {n} requirements met (G to 0.3 %, d to 100 um, 1 sigma, both GRS) with "
+                       f"{self.maneuver} in {hours}" + (f"; not met: {', '.join(missed)}" if len(missed) <= 4 else ""))
+        cannot = self._named("cannot")
+        if cannot:
+            worst = max(cannot, key=lambda c: c.bound if not np.isnan(c.bound) else c.sigma)
+            ratio = worst.bound if not np.isnan(worst.bound) else worst.sigma
+            what = ", ".join(f"{c.name} {c.bound if not np.isnan(c.bound) else c.sigma:.2f}x" for c in cannot)
+            text = (f"  cannot be met with this maneuver in {hours}: {what} (Cramer-Rao bound / requirement; "
+                    f"{worst.name}: {worst.amount(ratio)} against {worst.amount(1.0)}), so no estimator reaches them")
+            if self.maneuver_covers_run:
+                text += (f"; this maneuver needs about {self.duration_s * ratio ** 2 / 3600:.2f} h (the bound falls "
+                         "as 1/sqrt(T))")
+            out.append(text + ".")
+            if self.remedy:
+                out.append(f"  what to do: {self.remedy}")
+        for c in self._named("estimator"):
+            if np.isnan(c.sigma):
+                out.append(f"  {c.name}: not determined by the data (NaN), though the bound ({c.amount(c.bound)}) is "
+                           "within the requirement")
+            else:
+                out.append(f"  {c.name}: the reported 1-sigma {c.amount(c.sigma)} exceeds the requirement though the "
+                           f"bound ({c.amount(c.bound)}) is within it: the estimator does not reach the bound")
+        chance = self._named("chance")
+        if chance:
+            what = ", ".join(f"{c.name} {c.amount(abs(c.error))} ({abs(c.error) / c.sigma:.1f} sigma)" for c in chance)
+            out.append(f"  missed in this run only: {what}: bound and 1-sigma are within the requirement, the "
+                       "error of this draw is not; another --seed or a longer --duration-s")
+        low = [c for c in self.checks if not np.isnan(c.bound) and c.bound > 0 and c.sigma / c.bound
+               < _SIGMA_OVER_BOUND[0]]
+        high = [c for c in self.checks if not np.isnan(c.bound) and c.bound > 0 and c.sigma / c.bound
+                > _SIGMA_OVER_BOUND[1]]
+        if low:
+            out.append(f"  estimator: reported 1-sigma below the Cramer-Rao bound (overconfident) on "
+                       f"{', '.join(f'{c.name} {c.sigma / c.bound:.2f}x' for c in low)}")
+        if high:
+            out.append(f"  estimator: reported 1-sigma above the Cramer-Rao bound on "
+                       f"{', '.join(f'{c.name} {c.sigma / c.bound:.2f}x' for c in high)}")
+        wild = [c for c in self.checks if c.sigma > 0 and abs(c.error) / c.sigma > _ERROR_SIGMAS]
+        if wild:
+            out.append(f"  estimator: error beyond {_ERROR_SIGMAS:g} sigma on "
+                       f"{', '.join(f'{c.name} {abs(c.error) / c.sigma:.1f}' for c in wild)}: "
+                       "the estimate or its 1-sigma is off")
+        out.extend(f"  {w}" for w in self.warnings)
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``all_met``, ``met`` / ``cannot`` / ``estimator`` / ``chance`` (names), per
+        parameter ``sigma``, ``bound``, ``error`` as fractions of the requirement, and ``warnings``."""
+        def num(x: float) -> float | None:
+            return None if np.isnan(x) else float(x)
+
+        return {"all_met": self.all_met, "duration_s": self.duration_s, "maneuver": self.maneuver,
+                **{s: [c.name for c in self._named(s)] for s in ("met", "cannot", "estimator", "chance")},
+                "over_requirement": {c.name: {"sigma": num(c.sigma), "bound": num(c.bound), "error": num(c.error)}
+                                     for c in self.checks},
+                "remedy": self.remedy, "warnings": list(self.warnings)}
+
+
+def _sigma(cov: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.clip(np.diag(np.asarray(cov, dtype=float)), 0.0, None))
+
+
+def judge(table: EstimateTable, bound: Sequence[float] | None, duration_s: float, maneuver: str, *,
+          remedy: str = "", maneuver_covers_run: bool = True, warnings: Sequence[str] = ()) -> Verdict:
+    """The verdict of ``table``.
+
+    Parameters
+    ----------
+    table : EstimateTable
+        Final estimates of both GRS (truth where known).
+    bound : sequence of float, optional
+        (12,) Cramer-Rao bound / requirement of the flown maneuver and duration, in the order
+        ``grs1.G_Pphi .. grs1.d_z, grs2.G_Pphi .. grs2.d_z``
+        (``design.evaluate.requirement_ratios``); None: unknown.
+    duration_s : float
+        Length of the run [s].
+    maneuver : str
+        What was flown, for the text (``"the paper's preset"``).
+    remedy : str
+        What to do about requirements that cannot be met (a command line).
+    maneuver_covers_run : bool
+        The maneuver lasts the whole run (then a longer run of it lowers the bound as 1/sqrt(T)).
+    warnings : sequence of str
+        Lines to append (the simulator's range report and other warnings).
+    """
+    bound_arr = np.full(12, np.nan) if bound is None else np.asarray(bound, dtype=float)
+    checks = []
+    for i, r in enumerate(table.grs):
+        g, d = np.asarray(r.scale_factors, dtype=float), np.asarray(r.com_offset_m, dtype=float)
+        g_ref = np.abs(r.scale_factors_truth if r.scale_factors_truth is not None else g)
+        g_sig = _sigma(r.scale_factors_cov) / g_ref / SCALE_FACTOR_REQUIREMENT_REL
+        d_sig = _sigma(r.com_offset_cov) / COM_OFFSET_REQUIREMENT_M
+        g_err = (np.full(3, np.nan) if r.scale_factors_truth is None
+                 else (g - r.scale_factors_truth) / g_ref / SCALE_FACTOR_REQUIREMENT_REL)
+        d_err = (np.full(3, np.nan) if r.com_offset_truth_m is None
+                 else (d - r.com_offset_truth_m) / COM_OFFSET_REQUIREMENT_M)
+        for k in range(3):
+            checks.append(ParameterCheck(f"grs{r.grs_id}.{_G_NAMES[k]}", float(g_sig[k]), float(bound_arr[6 * i + k]),
+                                         float(g_err[k]), 100 * SCALE_FACTOR_REQUIREMENT_REL, "%"))
+        for k in range(3):
+            checks.append(ParameterCheck(f"grs{r.grs_id}.{_D_NAMES[k]}", float(d_sig[k]),
+                                         float(bound_arr[6 * i + 3 + k]), float(d_err[k]),
+                                         COM_OFFSET_REQUIREMENT_M * 1e6, "um"))
+    return Verdict(checks, float(duration_s), maneuver, remedy, maneuver_covers_run, list(warnings))
+
+
+def _where(fractions: np.ndarray) -> tuple[float, str]:
+    g, axis = np.unravel_index(int(np.argmax(fractions)), fractions.shape)
+    return float(fractions[g, axis]), f"GRS{g + 1} {'xyz'[axis]}"
+
+
+def range_warning(values: Mapping[str, Any], design_peak: float | None = None) -> str | None:
+    """One line from the simulator's ``GRS linear range`` diagnostic values; None: inside the range.
+
+    Parameters
+    ----------
+    values : mapping
+        ``range_m_s2``, ``samples``, ``maneuver_peak_fraction_of_range`` (2x3),
+        ``total_peak_fraction_of_range`` (2x3), ``total_samples_outside`` (2x3) as the simulator
+        publishes them.
+    design_peak : float, optional
+        Peak of the noise-free maneuver part / range (the design's figure).
+    """
+    total = np.asarray(values["total_peak_fraction_of_range"], dtype=float)
+    rotation = np.asarray(values["maneuver_peak_fraction_of_range"], dtype=float)
+    outside = np.asarray(values.get("total_samples_outside", np.zeros_like(total)), dtype=float)
+    total_peak, total_at = _where(total)
+    rot_peak, rot_at = _where(rotation)
+    if total_peak <= 1.0 and rot_peak <= 1.0:
+        return None
+    samples = max(int(values.get("samples", 0)), 1)
+    worst, worst_at = _where(outside)
+    text = (f"simulator: the GRS linear readout was beyond its +-{float(values['range_m_s2']):.0e} m/s^2 range in "
+            f"{worst / samples:.1%} of the samples ({worst_at}; {int(np.count_nonzero(outside))} of the 6 TM axes), "
+            f"peak {total_peak:.0%} ({total_at})")
+    if rot_peak > 1.0 and (design_peak is None or design_peak > 1.0):
+        return text + (f": the maneuver itself drives it out (rotation part {rot_peak:.0%}, {rot_at}); lower its "
+                       "amplitude, or let taiji2 design choose one inside the range")
+    alone = "" if design_peak is None else f"{design_peak:.0%} noise-free, "
+    return text + (f": noise (thruster force noise) on top of the maneuver, which peaks at {alone}{rot_peak:.0%} with "
+                   "the torque noise; not clipped in the simulation, a real GRS would saturate there "
+                   "(docs/physics_model.md section 8). Room for the noise: taiji2 design --range-margin 0.6 "
+                   "(a longer run)")
