@@ -14,15 +14,15 @@ import multiprocessing
 
 import numpy as np
 import pytest
+from test_estimator_nodes import _Feeder
 
 from taiji2_estimator_pkg.nodes.com_offset_estimator import ComOffsetEstimatorNode
 from taiji2_estimator_pkg.nodes.scale_factor_estimator import ScaleFactorEstimatorNode
-from taiji2_runtime.ros import messages, rclpy
+from taiji2_runtime.ros import messages
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 from support import spin_until
-from test_estimator_nodes import _Feeder
 
 N = 1200  # 120 s at 10 Hz
 STALL_AT = 705  # inside a 1-s publish period: only the end-of-data publish puts out an estimate of k - 1
@@ -60,7 +60,7 @@ def _run(context, executor, out, stall: bool) -> tuple[np.ndarray, np.ndarray, d
             # had they released epoch k without GRS2, of k)
             previous = round(out.t_s[k - 1] * 1e9)
             assert previous % 10**9 != 0
-            assert spin_until(executor, lambda: feeder.estimates and _stamp_ns(feeder.estimates[-1]) >= previous,
+            assert spin_until(executor, lambda p=previous: feeder.estimates and _stamp_ns(feeder.estimates[-1]) >= p,
                               timeout_s=60)
         feeder.voltages(t, 2, v[1])
         if k % 100 == 0:
