@@ -45,6 +45,16 @@ def main(args: argparse.Namespace) -> int:
     instrument = InstrumentModel.from_layout(args.config or args.layout)
     grs = {gid: (raw.grs(gid).stamp_ns, raw.grs(gid).voltages_v) for gid in (1, 2)}
     record = align_streams(raw.star_tracker.stamp_ns, raw.star_tracker.quat_xyzw, grs, instrument.sample_rate_hz)
+    corrections = None
+    if args.config:  # an extended layout (taiji2 diagnose --write-config): remove the known effects first
+        from taiji2_sim_pkg.core.config import load_config
+
+        layout = load_config(args.config)
+        if layout.effects:
+            from taiji2_estimator_pkg.diagnosis.correction import correct_raw
+
+            record.quat_xyzw, record.voltages_v, corrections = correct_raw(record.t_s, record.quat_xyzw,
+                                                                           record.voltages_v, layout)
     for topic, report in raw.report.items():
         for reason, n in {**report.dropped, **report.flagged}.items():
             record.count(topic, reason, n)
@@ -53,6 +63,8 @@ def main(args: argparse.Namespace) -> int:
     duration_s = float(record.t_s[-1] - record.t_s[0]) if record.t_s.size > 1 else 0.0
     table.extra.update({"bag": str(args.bag), "nominal_model": args.config or args.layout,
                         "duration_s": duration_s, "wall_time_s": elapsed})
+    if corrections is not None:
+        table.extra["known_effects"] = corrections
     if args.json:
         print(json.dumps(table.to_dict()))
         return 0
@@ -61,6 +73,9 @@ def main(args: argparse.Namespace) -> int:
     if raw.packets is not None:
         print("\n".join(raw.packets.lines()))
     print(format_table(table))
+    if corrections is not None:
+        print("known effects of the layout: " + "; ".join(f"{k.replace('_', ' ')}: {', '.join(v)}"
+                                                        for k, v in corrections.items() if v))
     rejected = table.extra["rejected"]
     if rejected:
         print("rejected: " + "; ".join(f"{s}: " + ", ".join(f"{r} {n}" for r, n in v.items())

@@ -37,6 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="taiji2_out/diagnosis",
                         help="output directory for report.md, report.json, plots (default taiji2_out/diagnosis)")
     parser.add_argument("--json", action="store_true", help="print report.json to stdout")
+    parser.add_argument("--write-config", metavar="FILE", default="",
+                        help="write the nominal layout extended with the named effects (timing section, effects "
+                             "with onsets) to FILE: `taiji2 diagnose BAG --config FILE` then models them")
     parser.add_argument("--candidates", default="", help="comma-separated effect families to consider (default all)")
     parser.add_argument("--exclude", default="", help="comma-separated effect families to leave out")
     parser.add_argument("--f-max-hz", type=float, default=None, help="highest frequency of the fits [Hz] (0.2)")
@@ -92,6 +95,8 @@ def main(args: argparse.Namespace) -> int:
     from taiji2_runtime.threads import limit_blas_threads
 
     limit_blas_threads()  # before any BLAS work: one BLAS thread (docs/threads.md)
+    import numpy as np
+
     from taiji2_estimator_pkg.diagnosis import FAMILIES, DiagnosisOptions, diagnose, write_report
     from taiji2_sim_pkg.core.config import load_config
 
@@ -128,6 +133,13 @@ def main(args: argparse.Namespace) -> int:
     result = diagnose(inp, config, options, progress)
     files = write_report(result, args.out, plots=not args.no_plots)
     progress(f"wrote {', '.join(str(p) for p in files.values())}")
+    if args.write_config:
+        import yaml
+
+        layout = result.extended_layout if result.extended_layout is not None else config.to_dict()
+        Path(args.write_config).write_text(yaml.safe_dump(layout, sort_keys=False), encoding="utf-8")
+        progress(f"wrote the extended layout {args.write_config}"
+                 + ("" if result.extended_layout is not None else " (nothing named: the nominal layout)"))
     if args.json:
         print(json.dumps(json.loads(files["report.json"].read_text(encoding="utf-8")), indent=1))
     else:
@@ -135,9 +147,19 @@ def main(args: argparse.Namespace) -> int:
         print(f"verdict: {verdict['summary']}")
         for effect in result.effects:
             if effect.accepted:
-                print(f"  {effect.key}: {effect.magnitude:.4g} +- {effect.sigma:.2g} {effect.unit}; shrink "
+                onset = effect.parameters.get("onset_s")
+                print(f"  {effect.key}: {effect.magnitude:.4g} +- {effect.sigma:.2g} {effect.unit}"
+                      + (f", from {onset['value']:.0f} +- {onset['sigma']:.0f} s"
+                         if onset and onset["modelled"] else "")
+                      + "; shrink "
                       f"{_share(effect.shrink)} (the part of the gap at its locations that it closes; held-out "
                       f"data: {_share(effect.shrink_heldout)})"
                       + (f"; aliases {', '.join(effect.aliases)}" if effect.aliases else ""))
+        corrected = result.corrected
+        if corrected:
+            shift = max(float(np.max(np.abs(corrected["g_shift_sigma"]))),
+                        float(np.max(np.abs(corrected["d_shift_sigma"]))))
+            print(f"  corrected calibration (named effects modelled): G and d move by up to {shift:.1f} sigma "
+                  "(report.md, report.json corrected_calibration)")
         print(f"report: {files['report.md']}")
     return _INSUFFICIENT if result.status != "ok" else 0

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -66,7 +66,8 @@ from taiji2_sim_pkg.core.frames import cross
 from .channels import TIMING_REACH_S, Linearization, Readouts, actuated_torque, perturbation_channels
 from .model import NominalModel
 
-__all__ = ["FAMILIES", "TIMING_FAMILIES", "Candidate", "CandidateContext", "NoiseCandidate", "candidate_catalog"]
+__all__ = ["FAMILIES", "ONSET_KINDS", "TIMING_FAMILIES", "Candidate", "CandidateContext", "NoiseCandidate",
+           "candidate_catalog"]
 
 FAMILIES = ("scale_factor_drift", "cross_coupling", "time_offset", "star_tracker_lowfreq_noise",
             "thruster_torque_gain", "com_drift", "readout_nonlinearity", "inertia_error", "gravity_gradient",
@@ -75,6 +76,11 @@ FAMILIES = ("scale_factor_drift", "cross_coupling", "time_offset", "star_tracker
 
 TIMING_FAMILIES = ("time_offset", "actuation_delay", "thruster_response", "grs_time_offset")
 """Families that are timing conventions (stamps, latency, thrust response), not physics."""
+
+ONSET_KINDS = {family: "step" for family in FAMILIES}
+ONSET_KINDS.update({"scale_factor_drift": "ramp", "com_drift": "ramp"})
+"""How each family starts mid-run (docs/diagnosis.md): a drift starts drifting (``ramp``: its clock starts at
+the onset), everything else switches on (``step``: the change is zero before the onset)."""
 
 DELAY_RANGE_S = TIMING_REACH_S
 """Timing candidates are scanned over +-0.5 s around the model's delay (and 0 .. 1 s of lag)."""
@@ -97,6 +103,9 @@ class CandidateContext:
         Suspension of the tm_stiffness candidate.
     t_mid_s : float
         Reference time of the drifts [s] (middle of the full record).
+    step_from_s, ramp_from_s : float or None
+        Onset of the signature [s] (data clock): a step (every data-side change is zero before it) or
+        a ramp (the drift clock ``max(t, onset) - t_mid``); None: present from the start.
     timing_base : dict
         Fitted timing the actuation signatures are conditioned on, beyond the model's:
         ``"delay_s"`` and ``"time_constant_s"`` (default 0). A delay's signature is then
@@ -112,6 +121,17 @@ class CandidateContext:
     damping: float
     t_mid_s: float
     timing_base: dict[str, float] = field(default_factory=dict)
+    step_from_s: float | None = None
+    ramp_from_s: float | None = None
+
+    def at_onset(self, kind: str, onset_s: float | None) -> CandidateContext:
+        """The context of a signature that starts at ``onset_s`` (None: from the start) as a ``"step"``
+        (the data-side change is zero before it) or a ``"ramp"`` (a drift whose clock starts there)."""
+        if onset_s is None:
+            return replace(self, step_from_s=None, ramp_from_s=None)
+        if kind == "ramp":
+            return replace(self, step_from_s=None, ramp_from_s=float(onset_s))
+        return replace(self, step_from_s=float(onset_s), ramp_from_s=None)
 
 
 @dataclass(frozen=True)
@@ -167,6 +187,11 @@ class Candidate:
     def is_timing(self) -> bool:
         """A timing convention rather than a physical effect."""
         return self.name in TIMING_FAMILIES
+
+    @property
+    def onset_kind(self) -> str:
+        """``"step"`` or ``"ramp"`` (:data:`ONSET_KINDS`)."""
+        return ONSET_KINDS[self.name]
 
     def series_names(self) -> list[str]:
         """Names of the series columns."""
@@ -255,12 +280,23 @@ def _tmrf_vector_to_crf(ctx: CandidateContext, grs: int, vectors: np.ndarray) ->
 
 
 def _centred_time(ctx: CandidateContext) -> np.ndarray:
+    if ctx.ramp_from_s is not None:
+        return np.maximum(ctx.readouts.t_s, ctx.ramp_from_s) - ctx.t_mid_s
     return ctx.readouts.t_s - ctx.t_mid_s
+
+
+def _perturb(ctx: CandidateContext, **changes: np.ndarray) -> np.ndarray:
+    """:func:`.channels.perturbation_channels` of data-side changes, zero before a step onset."""
+    if ctx.step_from_s is not None:
+        on = (ctx.readouts.t_s >= ctx.step_from_s).astype(np.float64)
+        changes = {key: value * on.reshape((-1,) + (1,) * (value.ndim - 1)) for key, value in changes.items()
+                   if value is not None}
+    return perturbation_channels(ctx.lin, ctx.model, **changes)
 
 
 def _torque_column(ctx: CandidateContext, torque: np.ndarray) -> np.ndarray:
     """Channels of an unmodelled torque (n, 3) [N m] (or angular acceleration already)."""
-    return perturbation_channels(ctx.lin, ctx.model, dtorque=torque @ ctx.model.inertia_inv.T)
+    return _perturb(ctx, dtorque=torque @ ctx.model.inertia_inv.T)
 
 
 def _unit(axis: int) -> np.ndarray:
@@ -281,7 +317,7 @@ def _scale_factor_drift(grs: int, pair: str) -> Candidate:
         tc = _centred_time(ctx)
         dg = _tmrf_to_crf_column(ctx, grs, angular, -tc * ctx.lin.ghat_pred[:, grs, angular])
         dl = _tmrf_to_crf_column(ctx, grs, linear, -tc * ctx.lin.lhat_pred[:, grs, linear])
-        return [perturbation_channels(ctx.lin, ctx.model, dg=dg, dl=dl)]
+        return [_perturb(ctx, dg=dg, dl=dl)]
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         return {"name": "scale_factor_drift", "rate_per_s": float(theta[0]), "grs": grs + 1, "axis": pair}
@@ -294,7 +330,7 @@ def _misalignment(grs: int, axis: int) -> Candidate:
         eps = _unit(axis)
         dg = _tmrf_vector_to_crf(ctx, grs, -cross(eps, ctx.lin.ghat[:, grs]))
         dl = _tmrf_vector_to_crf(ctx, grs, -cross(eps, ctx.lin.lhat[:, grs]))
-        return [perturbation_channels(ctx.lin, ctx.model, dg=dg, dl=dl)]
+        return [_perturb(ctx, dg=dg, dl=dl)]
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         return {"name": "cross_coupling", "grs": grs + 1, "misalignment_rad": (float(theta[0]) * _unit(axis)).tolist()}
@@ -311,7 +347,7 @@ def _imbalance(grs: int, pair: str) -> Candidate:
         r = ctx.model.ratio_m
         dg = _tmrf_to_crf_column(ctx, grs, angular, ctx.lin.lhat[:, grs, linear] / r)
         dl = _tmrf_to_crf_column(ctx, grs, linear, r * ctx.lin.ghat_pred[:, grs, angular])
-        return [perturbation_channels(ctx.lin, ctx.model, dg=dg, dl=dl)]
+        return [_perturb(ctx, dg=dg, dl=dl)]
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         return {"name": "cross_coupling", "grs": grs + 1, "imbalance": (float(theta[0]) * _unit(pair_index)).tolist()}
@@ -321,7 +357,7 @@ def _imbalance(grs: int, pair: str) -> Candidate:
 
 def _time_offset() -> Candidate:
     def build(ctx: CandidateContext) -> list[np.ndarray]:
-        return [perturbation_channels(ctx.lin, ctx.model, datt=-ctx.lin.omega)]
+        return [_perturb(ctx, datt=-ctx.lin.omega)]
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         return {"name": "time_offset", "offset_s": float(theta[0])}
@@ -350,7 +386,7 @@ def _com_drift(which: int, axis: int) -> Candidate:
         dl = np.zeros((tc.shape[0], 2, 3))
         for g in grs_list:
             dl[:, g] = motion
-        return [perturbation_channels(ctx.lin, ctx.model, dl=dl)]
+        return [_perturb(ctx, dl=dl)]
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         return {"name": "com_drift", "rate_m_s": (float(theta[0]) * _unit(axis)).tolist(), "grs": which}
@@ -364,11 +400,11 @@ def _nonlinearity(grs: int, readout: str) -> Candidate:
         if readout in ANGULAR_READOUTS:
             axis = ANGULAR_READOUTS.index(readout)
             measured = ctx.lin.ghat[:, grs, axis]
-            return [perturbation_channels(ctx.lin, ctx.model, dg=_tmrf_to_crf_column(ctx, grs, axis, measured ** p))
+            return [_perturb(ctx, dg=_tmrf_to_crf_column(ctx, grs, axis, measured ** p))
                     for p in exponents]
         axis = LINEAR_READOUTS.index(readout)
         measured = ctx.lin.lhat[:, grs, axis]
-        return [perturbation_channels(ctx.lin, ctx.model, dl=_tmrf_to_crf_column(ctx, grs, axis, measured ** p))
+        return [_perturb(ctx, dl=_tmrf_to_crf_column(ctx, grs, axis, measured ** p))
                 for p in exponents]
 
     def build(ctx: CandidateContext) -> list[np.ndarray]:
@@ -452,7 +488,7 @@ def _tm_stiffness(grs: int, axis: int, suspension_hz: float, damping: float) -> 
         b, a = suspension_filter(ctx.suspension_hz, ctx.damping, ctx.model.sample_rate_hz)
         lag = lfilter(b, a, ctx.lin.lhat[:, grs, axis])
         dl = _tmrf_to_crf_column(ctx, grs, axis, -lag)
-        return [perturbation_channels(ctx.lin, ctx.model, dl=dl)]
+        return [_perturb(ctx, dl=dl)]
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         return {"name": "tm_stiffness", "stiffness_s2": float(theta[0]), "grs": grs + 1, "axis": _AXES[axis],
@@ -465,7 +501,7 @@ def _force_leakage(force_axis: int, torque_axis: int) -> Candidate:
     def build(ctx: CandidateContext) -> list[np.ndarray]:
         acc = np.zeros_like(ctx.readouts.torque_cmd_n_m)
         acc[:, force_axis] = ctx.readouts.torque_cmd_n_m[:, torque_axis] / ctx.model.mass_kg
-        return [perturbation_channels(ctx.lin, ctx.model, dacc=acc)]
+        return [_perturb(ctx, dacc=acc)]
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         matrix = np.zeros((3, 3))
@@ -541,7 +577,7 @@ def _grs_time_offset(model_delay_s: float, dt_s: float) -> Candidate:
     def channels_at(ctx: CandidateContext, delta: float) -> np.ndarray:
         # GRS stamped delta late = the physics delayed by delta, the star tracker read delta early
         torque = _conditioned_change(ctx, delta, 0.0)
-        return torque + perturbation_channels(ctx.lin, ctx.model, datt=delta * ctx.lin.omega)
+        return torque + _perturb(ctx, datt=delta * ctx.lin.omega)
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
         return {"name": "grs_time_offset", "offset_s": float(theta[0])}

@@ -44,13 +44,15 @@ from .evaluation import (
     how_far,
     noise_report_data,
 )
+from .extended import corrected_calibration, extend_model, extended_layout, named_extension
 from .inputs import DiagnosisInput
-from .locations import Location, LocationGrid, scan_locations
+from .locations import Location, LocationGrid, scan_locations, time_window
 from .model import NominalModel
+from .onset import onset_posterior
 from .partners import jointly_determined
 from .record import Record, RecordSettings, calibrate
 from .spectral import dft
-from .standing import standing_verdict
+from .standing import FAMILY_VARIANTS_MAX, family_group, standing_verdict
 
 __all__ = ["DiagnosisOptions", "DiagnosisResult", "EffectReport", "diagnose", "variant_sensitivities"]
 
@@ -107,6 +109,13 @@ class DiagnosisOptions:
         reported as aliases (indistinguishable with these data).
     max_locations : int
         Locations listed in the report.
+    onsets : bool
+        Estimate when each accepted effect starts (:mod:`.onset`); model the onset when its GLR
+        statistic exceeds ``onset_penalty`` x ln N (BIC of one more parameter).
+    onset_penalty : float
+        See ``onsets``.
+    corrected_calibration : bool
+        Re-calibrate G and d under the nominal model extended with the named effects.
     """
 
     f_max_hz: float = 0.2
@@ -129,6 +138,9 @@ class DiagnosisOptions:
     candidates: tuple[str, ...] | None = None
     alias_correlation: float = 0.95
     max_locations: int = 25
+    onsets: bool = True
+    onset_penalty: float = 1.0
+    corrected_calibration: bool = True
 
 
 @dataclass
@@ -259,6 +271,12 @@ class DiagnosisResult:
         Arrays for the plots (PSD overlays, gap map).
     timing_s : dict
         Wall-clock time per stage.
+    corrected : dict
+        G and d re-calibrated under the nominal model extended with the named effects
+        (:func:`.extended.corrected_calibration`), with their covariance and shift from the nominal
+        calibration in sigmas; empty when nothing is named.
+    extended_layout : dict or None
+        The nominal layout extended with the named effects (``--write-config``).
     """
 
     status: str
@@ -276,6 +294,8 @@ class DiagnosisResult:
     plots: dict[str, Any] = field(default_factory=dict)
     timing_s: dict[str, float] = field(default_factory=dict)
     model: dict[str, Any] = field(default_factory=dict)
+    corrected: dict[str, Any] = field(default_factory=dict)
+    extended_layout: dict[str, Any] | None = None
 
     def to_json_dict(self, max_locations: int = 25) -> dict[str, Any]:
         """The ``report.json`` content (keys ``locations``, ``effects``, ``verdict`` and more)."""
@@ -290,6 +310,7 @@ class DiagnosisResult:
             "effects": [effect.to_dict() for effect in self.effects],
             "steps": self.steps,
             "calibration": self.calibration,
+            "corrected_calibration": self.corrected,
             "how_far": self.how_far,
             "inputs": self.inputs,
             "model": self.model,
@@ -462,17 +483,18 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     # one Gauss-Newton step on the nuisance columns alone, then the candidate record at that point;
     # its own nuisance fit checks the convergence (and the point moves again if needed)
     say(f"calibrating the nominal model on {inp.n} samples ({inp.duration_s / 3600:.2f} h)")
-    g, d, sigma_g, _sigma_d = calibrate(inp, model, settings, 1, say)
+    t_mid = float(0.5 * (inp.t_s[0] + inp.t_s[-1]))
+    model, fixed = extend_model(model, settings)  # a layout's known effects (its effects section)
+    g, d, sigma_g, _sigma_d = calibrate(inp, model, settings, 1, say, fixed, t_mid)
     lap("calibration")
     if not np.all(np.isfinite(sigma_g)) or float(np.max(sigma_g)) > options.max_relative_sigma_g:
         return _insufficient(result, f"the data determine the scale factors only to {np.max(sigma_g):.2g} "
                                      f"(relative, 1 sigma); {options.max_relative_sigma_g:g} needed")
     candidates, noise = candidate_catalog(options.candidates, options.orbit_period_s, options.suspension_hz,
                                           options.damping, options.st_corner_hz, model)
-    t_mid = float(0.5 * (inp.t_s[0] + inp.t_s[-1]))
     for iteration in range(max(1, options.calibration_iterations)):
         say(f"building the signatures of {len(candidates)} candidate variants")
-        full = Record(inp, model, g, d, settings, candidates, t_mid)
+        full = Record(inp, model, g, d, settings, candidates, t_mid, fixed=fixed)
         theta_check, cov_check, _ = full.fit(full.nuisance)
         sigma_check = np.sqrt(np.maximum(np.diag(cov_check)[:12], 1e-300))
         change = float(np.max(np.abs(theta_check[:12]) / sigma_check))
@@ -507,12 +529,21 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     marginal_all = full.spectrum.marginal(bins_all)
     template_all = full.spectrum.st_template(bins_all, options.st_corner_hz)
 
+    cells_by_band = {(band, kind): mask for band, kind, mask in grid.cells()}
+
     def scan(names: Sequence[str], theta: np.ndarray, kappa: float) -> tuple[list[Location], int, float, np.ndarray]:
         residual = dft(full.residual_time(names, theta))
         extra = kappa * template_all if kappa > 0 else None
         marginal_view, conditional_view = full.spectrum.normalised(residual, bins_all, extra)
-        locations, count, threshold = scan_locations({"marginal": marginal_view, "conditional": conditional_view},
-                                                     grid, inp.t_s, options.segments, options.alpha_locations)
+        views = {"marginal": marginal_view, "conditional": conditional_view}
+        locations, count, threshold = scan_locations(views, grid, inp.t_s, options.segments, options.alpha_locations)
+        # where in time: the window of the significant locations (the first ones)
+        for i, loc in enumerate(locations[:options.max_locations]):
+            if not loc.significant:
+                break
+            window, resolution = time_window(views[loc.view][:, CHANNELS.index(loc.channel)],
+                                             cells_by_band[(loc.band_hz, loc.kind)], inp.t_s)
+            locations[i] = replace(loc, window_s=window, window_resolution_s=resolution)
         return locations, count, threshold, residual
 
     say("scanning the residual channels (where)")
@@ -524,6 +555,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     # 3. which: forward selection -----------------------------------------------------------------
     say(f"forward selection over {n_candidates} candidates (which)")
     accepted: list[Candidate | NoiseCandidate] = []
+    onsets: dict[str, dict[str, Any]] = {}
     noise_fit: dict[str, float] = {}
     current = list(nuisance)
     _, _, chi2_current = full.fit(current)
@@ -565,6 +597,16 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
             full.rebuild(noise_step[0])
         elif isinstance(best, Candidate):
             full.refine(best, current)  # second-order signatures: relinearise at the fitted magnitude
+            if options.onsets:  # does it start mid-run? (profile likelihood over its onset, .onset)
+                info = onset_posterior(full, best, current)
+                info["modelled"] = bool(info["delta_chi2"] > options.onset_penalty * log_n)
+                if info["modelled"]:
+                    full.set_onset(best, info["value"])
+                    full.refine(best, current)
+                    say(f"  {best.key} starts at {info['value']:.0f} +- {info['sigma']:.0f} s "
+                        f"({info['kind']}; GLR delta chi2 {info['delta_chi2']:.1f})")
+                onsets[best.key] = info
+                steps[-1]["onset_s"] = {"value": info["value"], "sigma": info["sigma"], "modelled": info["modelled"]}
             current = current + best.column_names()
         _, _, chi2_current = full.fit(current)
     result.steps = steps
@@ -623,22 +665,48 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
                                   current, cov_final, options.alias_correlation)
     reports = _reports(full, candidates, noise, accepted, noise_fit, current, theta_final, cov_final, chi2_final,
                        log_n, options, model, aliases, floor[1], partners)
+    for report in reports:
+        info = onsets.get(report.key)
+        if info is not None:
+            report.parameters["onset_s"] = {key: info[key] for key in (
+                "value", "sigma", "mle", "delta_chi2", "interval", "resolution_s", "kind", "modelled")}
     result.how_far = how_far(full, [loc for loc in before if loc.segment == "all"][:8], accepted,
                              {noise.key: noise_fit.get("kappa", 0.0)} if noise is not None else {}, grid,
                              bins_all, template_all)
     lap("how_far")
 
     # 5. held out -----------------------------------------------------------------------------------
-    split = round(options.train_fraction * inp.n)
+    # an effect that starts mid-run is held out within its own span: train on the first part after the
+    # latest modelled onset (and all before it), hold out the rest
+    start = max([int(np.searchsorted(inp.t_s, full.onsets[c.key])) for c in accepted if c.key in full.onsets],
+                default=0)
+    split = start + round(options.train_fraction * (inp.n - start))
     if min(split, inp.n - split) * model.dt_s >= model.maneuver_period_s:
         say(f"held-out check: fit on the first {split * model.dt_s:.0f} s, apply to the last "
             f"{(inp.n - split) * model.dt_s:.0f} s")
         _held_out(inp, split, model, g, d, settings, options, candidates, noise, accepted, noise_fit, reports, t_mid,
-                  floor[1])
+                  floor[1], full.onsets, fixed)
     lap("held_out")
     result.effects = reports
+    families = _families(full, candidates, accepted, current, chi2_final, log_n)
+    if families:
+        result.verdict["families"] = families
     _apply_naming_rule(result, reports, remaining)
     summary = result.verdict["summary"]
+
+    # 6. the corrected calibration: the model extended with the named effects, G and d re-calibrated --
+    by_key = {c.key: c for c in candidates}
+    timing_change, named_fixed, specs = named_extension(reports, by_key, full.onsets, t_mid)
+    if options.corrected_calibration and (named_fixed or any(timing_change)):
+        say("corrected calibration: G and d under the model extended with the named effects")
+        result.corrected = corrected_calibration(inp, model, settings, timing_change, [*fixed, *named_fixed],
+                                                 result.calibration, t_mid, max(2, options.calibration_iterations),
+                                                 say)
+        result.corrected["effects"] = specs
+        if isinstance(nominal, SimConfig):
+            result.extended_layout = extended_layout(nominal.to_dict(), [s for s in specs if "timing" in s],
+                                                     [s for s in specs if "timing" not in s])
+    lap("corrected")
 
     # plot data ------------------------------------------------------------------------------------
     freq_all = bins_all * model.sample_rate_hz / full.n
@@ -651,7 +719,9 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
                     "psd_model": psd_model, "psd_model_after": psd_model_after,
                     "gap_map_before": _gap_map(before, options), "gap_map_after": _gap_map(after, options),
                     "bands": list(zip(options.band_edges_hz[:-1], options.band_edges_hz[1:], strict=True)),
-                    "threshold": threshold, "sample_rate_hz": model.sample_rate_hz, "n": full.n}
+                    "threshold": threshold, "sample_rate_hz": model.sample_rate_hz, "n": full.n,
+                    "onsets": [(r.key, r.parameters["onset_s"]["value"], r.parameters["onset_s"]["sigma"])
+                               for r in reports if r.accepted and r.parameters.get("onset_s", {}).get("modelled")]}
     timing["total"] = round(sum(timing.values()), 3)
     result.timing_s = timing
     say(f"done in {timing['total']:.1f} s: {summary}")
@@ -678,16 +748,61 @@ def _where(locations: Sequence[Location] | Sequence[dict[str, Any]]) -> str:
     for loc in locations[:3]:
         item = loc if isinstance(loc, dict) else loc.to_dict()
         lo, hi = item["band_hz"]
+        window = ""
+        if "window_s" in item and "segment_s" in item:
+            start, end = item["window_s"]
+            run = item["segment_s"][1] - item["segment_s"][0] if item["segment"] == "all" else float("inf")
+            if end - start < 0.5 * run:  # a localised gap: say when
+                window = f", {start:.0f}-{end:.0f} s +- {item['window_resolution_s']:.2g} s"
         parts.append(f"{item['channel']} {lo:.2g}-{hi:.2g} Hz ({item['kind']}"
-                     + (f", {item['segment']}, {item['view']}" if "segment" in item else "") + ")")
+                     + (f", {item['segment']}, {item['view']}" if "segment" in item else "") + window + ")")
     return "; ".join(parts)
+
+
+def _families(full: Record, candidates: Sequence[Candidate], accepted: Sequence[Candidate | NoiseCandidate],
+              current: Sequence[str], chi2_final: float, log_n: float) -> list[dict[str, Any]]:
+    """Stacks of variants of one physical family, tested as one candidate (naming rule 3).
+
+    The family (every variant of it: one GRS's cross-coupling, the three axes of a torque gain) is
+    one candidate with its whole parameter count p in the BIC penalty. A stack of k accepted
+    variants stands as that family when the family is complete (k = p), or when the p - k variants
+    it lacks gain more than ``(p - k) ln N`` in the final model; it is then named once, with its
+    vector of magnitudes and their covariance (the fit with every variant of the family).
+    """
+    groups: dict[str, list[Candidate]] = {}
+    for candidate in accepted:
+        if isinstance(candidate, Candidate) and not candidate.is_timing and candidate.variant:
+            groups.setdefault(family_group(candidate.name, candidate.variant), []).append(candidate)
+    out = []
+    for group, members in groups.items():
+        if len(members) <= FAMILY_VARIANTS_MAX:
+            continue
+        family = [c for c in candidates if family_group(c.name, c.variant) == group]
+        missing = [c for c in family if c not in members]
+        extra = [name for c in missing for name in c.column_names()]
+        names = list(current) + extra
+        theta, cov, chi2_family = full.fit(names)
+        member_names = [name for c in family for name in c.column_names()]
+        index = [names.index(name) for name in member_names]
+        without = [name for name in current if name not in member_names]
+        gain = full.chi2(without) - chi2_family
+        p = len(member_names)
+        extra_gain = chi2_final - chi2_family
+        stands = not missing or extra_gain > len(extra) * log_n
+        out.append({"family": group, "variants": [c.key for c in family], "accepted_variants": [c.key for c in members],
+                    "magnitudes": theta[index].tolist(), "covariance": cov[np.ix_(index, index)].tolist(),
+                    "sigmas": np.sqrt(np.maximum(np.diag(cov)[index], 0.0)).tolist(), "n_params": p,
+                    "delta_chi2": float(gain), "score": float(gain - p * log_n),
+                    "delta_chi2_of_the_missing_variants": float(extra_gain), "stands": bool(stands)})
+    return out
 
 
 def _apply_naming_rule(result: DiagnosisResult, reports: Sequence[EffectReport], remaining: Sequence[Location]
                        ) -> None:
     """Name only the effects that stand on their own; say first where an unexplained gap sits."""
     verdict = result.verdict
-    named, rejected = standing_verdict(reports, bool(verdict["unexplained"]))
+    families = [f["family"] for f in verdict.get("families", []) if f["stands"]]
+    named, rejected = standing_verdict(reports, bool(verdict["unexplained"]), families)
     if not rejected:
         return
     names = list(dict.fromkeys(report.name for report in named))
@@ -836,12 +951,13 @@ def _joint_timing(full: Record, accepted: Sequence[Candidate], current: Sequence
 def _held_out(inp: DiagnosisInput, split: int, model: NominalModel, g: np.ndarray, d: np.ndarray,
               settings: RecordSettings, options: DiagnosisOptions, candidates: Sequence[Candidate],
               noise: NoiseCandidate | None, accepted: Sequence[Candidate | NoiseCandidate],
-              noise_fit: dict[str, float], reports: list[EffectReport], t_mid: float, floor: float) -> None:
+              noise_fit: dict[str, float], reports: list[EffectReport], t_mid: float, floor: float,
+              onsets: dict[str, float] | None = None, fixed: Sequence[Any] = ()) -> None:
     """Fit every reported effect on the training part and apply it to the held-out part."""
     wanted = {r.key for r in reports}
     chosen = [c for c in candidates if c.key in wanted or c in accepted]
-    train = Record(inp.slice(0, split), model, g, d, settings, chosen, t_mid)
-    test = Record(inp.slice(split, inp.n), model, g, d, settings, chosen, t_mid)
+    train = Record(inp.slice(0, split), model, g, d, settings, chosen, t_mid, onsets, fixed)
+    test = Record(inp.slice(split, inp.n), model, g, d, settings, chosen, t_mid, onsets, fixed)
     accepted_det = [c for c in accepted if isinstance(c, Candidate)]
     edges, period, halfwidth = options.band_edges_hz, model.maneuver_period_s, options.harmonic_halfwidth
     base = list(train.nuisance) + [name for c in accepted_det for name in c.column_names()]

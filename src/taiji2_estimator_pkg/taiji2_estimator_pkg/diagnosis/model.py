@@ -70,6 +70,9 @@ class NominalModel:
         attitude at t - e).
     time_constant_s : float
         First-order thruster response T [s].
+    effects : tuple of dict
+        Known catalog effects of an extended nominal model (the layout's ``effects`` section;
+        :mod:`.extended`).
     """
 
     sample_rate_hz: float
@@ -92,6 +95,7 @@ class NominalModel:
     delay_s: float = 0.0
     st_offset_s: float = 0.0
     time_constant_s: float = 0.0
+    effects: tuple = ()
 
     @property
     def dt_s(self) -> float:
@@ -173,6 +177,7 @@ class NominalModel:
             delay_s=float(delay_s),
             st_offset_s=float(st_offset_s),
             time_constant_s=float(time_constant_s),
+            effects=tuple(getattr(config, "effects", ())),
         )
 
     def summary(self) -> dict[str, object]:
@@ -190,6 +195,7 @@ class NominalModel:
             "thruster_torque_asd_n_m_rthz": np.sqrt(self.var_torque / (0.5 * self.sample_rate_hz)).tolist(),
             "timing": {"delay_s": self.delay_s, "st_offset_s": self.st_offset_s,
                        "time_constant_s": self.time_constant_s},
+            "effects": [dict(effect) for effect in self.effects],
             "srp_decay_per_step": self.srp_decay,
             "srp_corner_hz": (-math.log(self.srp_decay) * self.sample_rate_hz / (2 * math.pi)
                               if 0.0 < self.srp_decay < 1.0 else None),

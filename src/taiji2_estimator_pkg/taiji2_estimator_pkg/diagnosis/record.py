@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -18,7 +19,7 @@ from .inputs import DiagnosisInput
 from .model import NominalModel
 from .spectral import Design, NoiseSpectrum, Whitener, dft
 
-__all__ = ["Record", "RecordSettings", "calibrate", "column_fft"]
+__all__ = ["Record", "RecordSettings", "calibrate", "column_fft", "fixed_change"]
 
 _FIXED = "__fixed_change__"  # a scratch design column for fits with a fixed channel change
 
@@ -73,10 +74,17 @@ class Record:
         Variants whose columns are built.
     t_mid_s : float
         Reference time of the drift signatures [s] (middle of the whole run).
+    onsets : dict of str to float, optional
+        Variant key -> onset [s] of the variants that start mid-run (:meth:`set_onset`).
+    fixed : sequence of (Candidate, theta, onset), optional
+        Effects of an extended nominal model, subtracted from the channels at their given values
+        (:func:`fixed_change`).
     """
 
     def __init__(self, inp: DiagnosisInput, model: NominalModel, g_angular: np.ndarray, com_offset_m: np.ndarray,
-                 settings: RecordSettings, candidates: Sequence[Candidate], t_mid_s: float) -> None:
+                 settings: RecordSettings, candidates: Sequence[Candidate], t_mid_s: float,
+                 onsets: dict[str, float] | None = None,
+                 fixed: Sequence[tuple] = ()) -> None:
         self.inp = inp
         self.model = model
         self.settings = settings
@@ -88,13 +96,17 @@ class Record:
         self.spectrum = NoiseSpectrum(model, com_offset_m, self.n)
         self.ctx = CandidateContext(self.lin, self.readouts, model, settings.orbit_period_s, settings.suspension_hz,
                                     settings.damping, t_mid_s)
+        self.fixed = list(fixed)
+        if self.fixed:  # the extended nominal model: its known effects leave the channels
+            self.lin.channels[:] -= sum(fixed_change(self.ctx, *entry) for entry in self.fixed)
+        self.onsets: dict[str, float] = dict(onsets or {})
         self.nuisance = nuisance_names()
         self.ffts: dict[str, np.ndarray] = {}
         for name in self.nuisance:
             self.ffts[name] = column_fft(nuisance_column(self.lin, model, name), self.k_max)
         self.candidates = {c.key: c for c in candidates}
         for candidate in candidates:
-            for name, column in zip(candidate.column_names(), candidate.build(self.ctx), strict=True):
+            for name, column in zip(candidate.column_names(), candidate.build(self.ctx_of(candidate)), strict=True):
                 self.ffts[name] = column_fft(column, self.k_max)
         self.names = list(self.ffts)
         self.y_fft = dft(self.lin.channels, self.k_max)
@@ -139,7 +151,7 @@ class Record:
         names = candidate.series_names()
         missing = [name for name in names if name not in self.ffts]
         if missing and candidate.series is not None:
-            ffts = [column_fft(column, self.k_max) for column in candidate.series(self.ctx)]
+            ffts = [column_fft(column, self.k_max) for column in candidate.series(self.ctx_of(candidate))]
             for name, fft in zip(names, ffts, strict=True):
                 self.ffts[name] = fft
             self.names = [*self.names, *names]
@@ -289,15 +301,67 @@ class Record:
         return float(theta @ gram[np.ix_(o, o)] @ theta - cross_term @ solved)
 
     # time domain --------------------------------------------------------------------------
-    def _candidate_columns(self, candidate: Candidate) -> list[np.ndarray]:
-        """Time-domain columns of a candidate at its current linearisation (the secant, if relinearised)."""
-        if candidate.key in self.exact_secants:
-            return [self.exact_secants[candidate.key]]
+    def ctx_of(self, candidate: Candidate, onset_s: float | str | None = "current") -> CandidateContext:
+        """The candidate context with the candidate's onset (``"current"``: the one set, if any)."""
+        onset = self.onsets.get(candidate.key) if onset_s == "current" else onset_s
+        return self.ctx.at_onset(candidate.onset_kind, onset) if onset is not None else self.ctx
+
+    def _candidate_columns(self, candidate: Candidate, onset_s: float | str | None = "current") -> list[np.ndarray]:
+        """Time-domain columns of a candidate at its current linearisation (the secant, if relinearised),
+        starting at its onset (or at ``onset_s``)."""
+        ctx = self.ctx_of(candidate, onset_s)
         value = self.secant.get(candidate.key)
+        if candidate.key in self.exact_secants:
+            if onset_s == "current" or candidate.exact is None or not value:
+                return [self.exact_secants[candidate.key]]
+            return [candidate.exact(ctx, value) / value]
         if value is None or candidate.series is None:
-            return candidate.build(self.ctx)
+            return candidate.build(ctx)
         weights = self._secant_weights(candidate, value)
-        return [sum(w * c for w, c in zip(weights, candidate.series(self.ctx), strict=True))]
+        return [sum(w * c for w, c in zip(weights, candidate.series(ctx), strict=True))]
+
+    def set_onset(self, candidate: Candidate, onset_s: float | None) -> None:
+        """Let a candidate start at ``onset_s`` (None: from the start): its columns (and series) rebuilt."""
+        if onset_s is None:
+            self.onsets.pop(candidate.key, None)
+        else:
+            self.onsets[candidate.key] = float(onset_s)
+        ctx = self.ctx_of(candidate)
+        if candidate.key in self.exact_secants and candidate.exact is not None and self.secant.get(candidate.key):
+            value = self.secant[candidate.key]
+            self.set_exact_secant(candidate, value, candidate.exact(ctx, value))
+        names = candidate.series_names()
+        if candidate.series is not None and names and names[0] in self.ffts:
+            for name, column in zip(names, candidate.series(ctx), strict=True):
+                self.ffts[name] = column_fft(column, self.k_max)
+                self.design.replace(self.whitener, name, self.ffts[name])
+        if candidate.key in self.exact_secants:
+            return
+        for name, column in zip(candidate.column_names(), self._candidate_columns(candidate), strict=True):
+            self.ffts[name] = column_fft(column, self.k_max)
+            self.design.replace(self.whitener, name, self.ffts[name])
+
+    def onset_profile(self, candidate: Candidate, others: Sequence[str], onsets_s: Sequence[float]
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """chi2 and ``log det`` of the candidate's parameter covariance for each trial onset, ``others``
+        refitted (the profile likelihood over the onset; :func:`.onset.onset_posterior`)."""
+        p = candidate.n_params
+        scratch = [f"__onset__:{j}" for j in range(p)]
+        chi2 = np.empty(len(onsets_s))
+        log_det = np.empty(len(onsets_s))
+        for i, onset in enumerate(onsets_s):
+            columns = self._candidate_columns(candidate, float(onset))
+            ffts = [column_fft(column, self.k_max) for column in columns]
+            if scratch[0] not in self.design.names:
+                self.design.append(self.whitener, scratch, ffts)
+            else:
+                for name, fft in zip(scratch, ffts, strict=True):
+                    self.design.replace(self.whitener, name, fft)
+            _, cov, chi2[i] = self.fit(list(others) + scratch)
+            block = cov[-p:, -p:]
+            sign, value = np.linalg.slogdet(block)
+            log_det[i] = value if sign > 0 else -np.inf
+        return chi2, log_det
 
     def time_column(self, name: str) -> np.ndarray:
         """(n, 15) column by name (recomputed)."""
@@ -402,8 +466,14 @@ class Record:
 
 
 def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings, iterations: int,
-              progress: Callable[[str], None]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+              progress: Callable[[str], None],
+              fixed: Sequence[tuple] = (), t_mid_s: float | None = None,
+              info: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Gauss-Newton calibration of G and d (with the trends and wrap impulses).
+
+    ``fixed``: effects of an extended nominal model (candidate, values, onset), subtracted from the
+    channels at each iteration (:func:`fixed_change`); ``info`` (if given) receives ``"cov"``, the
+    (12, 12) covariance of (relative G, d) of the last iteration, and ``"chi2"``.
 
     Returns
     -------
@@ -425,12 +495,21 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
     names = nuisance_names()
     sigma_g = np.full((2, 3), np.inf)
     sigma_d = np.full((2, 3), np.inf)
+    t_mid = float(0.5 * (inp.t_s[0] + inp.t_s[-1])) if t_mid_s is None else t_mid_s
     for iteration in range(max(1, iterations)):
         lin = linearize(readouts, model, g, d)
+        if fixed:
+            ctx = CandidateContext(lin, readouts, model, settings.orbit_period_s, settings.suspension_hz,
+                                   settings.damping, t_mid)
+            lin.channels[:] -= sum(fixed_change(ctx, *entry) for entry in fixed)
         whitener = Whitener(NoiseSpectrum(model, d, n), bins)
         design = Design.build(whitener, dft(lin.channels, k_max), names,
                               [column_fft(nuisance_column(lin, model, name), k_max) for name in names])
-        theta, cov, _ = design.fit(np.arange(len(names)))
+        theta, cov, chi2 = design.fit(np.arange(len(names)))
+        if info is not None:
+            info["cov"] = cov[:12, :12]
+            info["chi2"] = chi2
+            info["dof"] = design.n_rows - len(names)
         sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
         sigma_g, sigma_d = sig[:6].reshape(2, 3), sig[6:12].reshape(2, 3)
         g = g * (1.0 + theta[:6].reshape(2, 3))
@@ -440,3 +519,20 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
         if change < 0.05:
             break
     return g, d, sigma_g, sigma_d
+
+
+def fixed_change(ctx: CandidateContext, candidate: Candidate, theta: np.ndarray, onset_s: float | None,
+                 t_ref_s: float | None = None) -> np.ndarray:
+    """(n, 15) channel change of a candidate at the values ``theta`` (exact where the signature has an
+    exact or series form, first order otherwise), starting at ``onset_s``; a drift is zero at ``t_ref_s``
+    (default: the middle of the run)."""
+    ctx = ctx.at_onset(candidate.onset_kind, onset_s)
+    if t_ref_s is not None:
+        ctx = replace(ctx, t_mid_s=float(t_ref_s))
+    theta = np.atleast_1d(np.asarray(theta, dtype=np.float64))
+    if candidate.exact is not None:
+        return candidate.exact(ctx, float(theta[0]))
+    if candidate.series is not None and candidate.coefficients is not None:
+        weights = candidate.coefficients(float(theta[0]))
+        return sum(w * c for w, c in zip(weights, candidate.series(ctx), strict=True))
+    return sum(value * column for value, column in zip(theta, candidate.build(ctx), strict=True))

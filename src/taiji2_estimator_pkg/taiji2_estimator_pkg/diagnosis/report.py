@@ -101,6 +101,12 @@ def _markdown(result: DiagnosisResult, files: list[str]) -> str:
                       f"{_fmt(effect.magnitude_train, 4)} +- {_fmt(effect.sigma_train, 2)}, shrink "
                       f"{_fmt(effect.shrink_heldout, 3)}, delta chi2 {_fmt(effect.heldout_delta_chi2, 3)} of "
                       f"{_fmt(effect.heldout_delta_chi2_best, 3)} possible"]
+            onset = effect.parameters.get("onset_s")
+            if onset:
+                lines.append(f"- onset ({onset['kind']}): {onset['value']:.0f} +- {onset['sigma']:.0f} s "
+                             f"(68 % {onset['interval'][0]:.0f}-{onset['interval'][1]:.0f} s, GLR delta chi2 "
+                             f"{onset['delta_chi2']:.1f}, resolution {onset['resolution_s']:.1f} s; "
+                             + ("modelled" if onset["modelled"] else "present from the start: not modelled") + ")")
             if effect.aliases:
                 lines.append(f"- indistinguishable with these data from: {', '.join(effect.aliases)}")
             if effect.partners:
@@ -130,6 +136,24 @@ def _markdown(result: DiagnosisResult, files: list[str]) -> str:
                 lines.append(f"| {row['channel']} | {row['view']} | {row['band_hz'][0]:.3g}-{row['band_hz'][1]:.3g} | "
                              f"{row['kind']} | {row['gap_nominal']:.3f} | "
                              + " | ".join(f"{a['gap']:.3f}" for a in row["after"]) + " |")
+    corrected = result.corrected
+    if corrected:
+        lines += ["", "## Corrected calibration (the nominal model extended with the named effects)", "",
+                  f"Extended timing: {corrected['timing']}; effects: {corrected.get('effects')}", "",
+                  "| GRS | parameter | nominal | corrected | sigma | shift [sigma] |", "|---|---|---|---|---|---|"]
+        nominal_g, nominal_d = cal["g_angular"], cal["com_offset_m"]
+        for grs in range(2):
+            for i, axis in enumerate(("phi", "theta", "psi")):
+                lines.append(f"| {grs + 1} | G_{axis} | {nominal_g[grs][i]:.6g} | "
+                             f"{corrected['g_angular'][grs][i]:.6g} | "
+                             f"{corrected['g_angular_sigma_relative'][grs][i] * 1e6:.0f} ppm | "
+                             f"{corrected['g_shift_sigma'][grs][i]:+.2f} |")
+            for i, axis in enumerate("xyz"):
+                lines.append(f"| {grs + 1} | d_{axis} [m] | {nominal_d[grs][i]:.6g} | "
+                             f"{corrected['com_offset_m'][grs][i]:.6g} | "
+                             f"{corrected['com_offset_sigma_m'][grs][i] * 1e6:.1f} um | "
+                             f"{corrected['d_shift_sigma'][grs][i]:+.2f} |")
+        lines += ["", "Covariance (12 x 12, relative G then d): report.json `corrected_calibration.covariance`."]
     remaining = result.verdict.get("remaining", [])
     lines += ["", "## Remaining gap", ""]
     if remaining:
@@ -200,7 +224,9 @@ def _plots(result: DiagnosisResult, out: Path) -> list[str]:
         ax.set_xlabel("frequency band [Hz]")
         ax.set_ylabel("channel")
         figure.colorbar(image, ax=ax, fraction=0.046).set_label("significance of the excess, -log10 p")
-    figure.suptitle(f"gap map (* above the threshold {plots['threshold']:.2f})", fontsize=11)
+    onsets = "; ".join(f"{key} from {value:.0f} +- {sigma:.0f} s" for key, value, sigma in plots.get("onsets", []))
+    figure.suptitle(f"gap map (* above the threshold {plots['threshold']:.2f})"
+                    + (f"; onsets: {onsets}" if onsets else ""), fontsize=11)
     figure.tight_layout(rect=(0, 0, 1, 0.95))
     figure.savefig(out / "gap_map.png", dpi=90)
     written.append("gap_map.png")

@@ -11,10 +11,13 @@ naming them would be a confident wrong name. So an accepted effect is named only
    ``HELDOUT_Z_MIN_UNEXPLAINED`` when a gap stays unexplained (the situation in which partial
    explanations are selected);
 3. it is not one of ``FAMILY_VARIANTS_MAX + 1`` or more variants of one physical family accepted
-   together: forward selection stacking variants of one family is how a catalog imitates an
-   effect it does not hold (a left-out TM stiffness fitted by four electrode imbalances); one
-   physical effect rarely shows as that many independent variants at once, so such a stack is
-   reported as an unexplained gap, not as a list of names.
+   together, unless the family as one candidate stands (:func:`family_group`, engine
+   ``_families``): forward selection stacking variants of one family is how a catalog imitates an
+   effect it does not hold (a left-out TM stiffness fitted by four electrode imbalances). The
+   family (all its variants, one GRS) is one candidate with its whole parameter count in the
+   penalty: it stands when it is complete, or when the variants the stack lacks gain more than
+   their BIC penalty (a full cross-talk matrix of which selection took four terms); a stack whose
+   family-level fit does not beat it is reported as an unexplained gap, not as a list of names.
 
 An effect that fails is reported with ``accepted = false`` and the reason; the gap it was
 selected for is then part of the unexplained verdict.
@@ -25,12 +28,19 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-__all__ = ["FAMILY_VARIANTS_MAX", "HELDOUT_Z_MIN", "HELDOUT_Z_MIN_UNEXPLAINED", "SHRINK_MIN", "standing_verdict"]
+__all__ = ["FAMILY_VARIANTS_MAX", "HELDOUT_Z_MIN", "HELDOUT_Z_MIN_UNEXPLAINED", "SHRINK_MIN", "family_group",
+           "standing_verdict"]
 
 SHRINK_MIN = 0.5
 HELDOUT_Z_MIN = 1.0
 HELDOUT_Z_MIN_UNEXPLAINED = 3.0
 FAMILY_VARIANTS_MAX = 2
+
+
+def family_group(name: str, variant: str) -> str:
+    """The physical family a variant belongs to: the effect on one GRS (``cross_coupling[grs1]``,
+    ``com_drift[both]``, ``thruster_force_leakage[Fx]``) or the whole effect (``thruster_torque_gain``)."""
+    return f"{name}[{variant.split('.')[0]}]" if "." in variant else name
 
 
 def _reason(report: Any, unexplained: bool) -> str | None:
@@ -44,7 +54,8 @@ def _reason(report: Any, unexplained: bool) -> str | None:
     return None
 
 
-def standing_verdict(reports: Sequence[Any], unexplained: bool) -> tuple[list[Any], dict[str, str]]:
+def standing_verdict(reports: Sequence[Any], unexplained: bool, families: Sequence[str] = ()
+                     ) -> tuple[list[Any], dict[str, str]]:
     """Apply the naming rule to the accepted effect reports.
 
     Parameters
@@ -53,6 +64,8 @@ def standing_verdict(reports: Sequence[Any], unexplained: bool) -> tuple[list[An
         All effect reports (accepted ones first).
     unexplained : bool
         Whether a gap stays unexplained with every accepted effect modelled.
+    families : sequence of str
+        Family groups (:func:`family_group`) that stand as one candidate: their stacks are named.
 
     Returns
     -------
@@ -65,6 +78,7 @@ def standing_verdict(reports: Sequence[Any], unexplained: bool) -> tuple[list[An
     named = []
     rejected: dict[str, str] = {}
     stacked: dict[str, int] = {}
+    standing_families = set(families)
     for report in reports:
         if report.accepted and report.variant:  # physical families have variants; timing and noise do not
             stacked[report.name] = stacked.get(report.name, 0) + 1
@@ -72,9 +86,11 @@ def standing_verdict(reports: Sequence[Any], unexplained: bool) -> tuple[list[An
         if not report.accepted:
             continue
         reason = _reason(report, unexplained)
-        if reason is None and stacked.get(report.name, 0) > FAMILY_VARIANTS_MAX:
+        if (reason is None and stacked.get(report.name, 0) > FAMILY_VARIANTS_MAX
+                and family_group(report.name, report.variant) not in standing_families):
             reason = (f"one of {stacked[report.name]} variants of {report.name} accepted together: they imitate "
-                      f"a gap that no single catalog effect explains")
+                      f"a gap that no single catalog effect explains (the family as one candidate does not beat "
+                      f"them)")
         if reason is None:
             named.append(report)
         else:

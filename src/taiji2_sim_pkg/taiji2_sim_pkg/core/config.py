@@ -448,6 +448,23 @@ def _parse(raw: dict[str, Any], default_name: str) -> SimConfig:
         thrusters=_parse_thrusters(root.section("thrusters")),
         noise=_parse_noise(root.section("noise")),
         timing=_parse_timing(root, 1.0 / sample_rate_hz),
+        effects=_parse_effects(root),
     )
     root.finish()
     return config
+
+
+def _parse_effects(root: _Section) -> tuple[dict[str, Any], ...]:
+    """The ``effects`` section of an extended nominal model: catalog effects, validated."""
+    raw = root.optional("effects")
+    if raw is None:
+        return ()
+    if not isinstance(raw, list):
+        raise ConfigError("effects", "must be a list of {name: ..., <parameters>} mappings")
+    from .effect_catalog import effects_from_config  # the catalog builds on this module
+
+    try:
+        effects_from_config(raw)
+    except ValueError as error:
+        raise ConfigError("effects", str(error)) from error
+    return tuple(copy.deepcopy(dict(entry)) for entry in raw)

@@ -353,6 +353,11 @@ class SimConfig:
     spacecraft, grs, maneuver, thrusters, noise, timing
         See the respective classes (``timing`` optional in a YAML: defaults to the simulator's
         conventions).
+    effects : tuple of dict
+        Known catalog effects of an *extended* nominal model (section ``effects``, optional: a list
+        of ``{"name": ..., <parameters>, "onset_s": ...}`` as :func:`~.effect_catalog.make_effect`
+        takes them), e.g. as ``taiji2 diagnose --write-config`` writes them. The diagnosis and
+        ``taiji2 calibrate`` model them; the simulator does not inject them (give ``--effect``).
     """
 
     layout: str
@@ -363,6 +368,7 @@ class SimConfig:
     thrusters: ThrusterConfig
     noise: NoiseConfig
     timing: TimingConfig = field(default_factory=TimingConfig)
+    effects: tuple[dict[str, Any], ...] = ()
 
     def __eq__(self, other: object) -> bool:
         """Value equality (the arrays inside make the generated ``__eq__`` unusable)."""
@@ -396,6 +402,8 @@ def _to_plain(value: Any) -> Any:
         return {f.name: _to_plain(getattr(value, f.name)) for f in fields(value)}
     if isinstance(value, tuple | list):
         return [_to_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _to_plain(v) for k, v in value.items()}
     if isinstance(value, bool | int | str):
         return value
     if isinstance(value, float | np.floating):

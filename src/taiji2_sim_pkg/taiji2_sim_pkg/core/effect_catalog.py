@@ -133,12 +133,38 @@ def _choice(effect: str, name: str, value: str, options: Iterable[str]) -> str:
 
 
 class _CatalogEffect(Effect):
-    """Common parts: the ``enabled`` switch and provenance of the parameters."""
+    """Common parts: the ``enabled`` switch, the onset and provenance of the parameters.
+
+    ``onset_s``: the effect starts at this time [s] (simulation clock), as a step (``ONSET_KIND =
+    "step"``: absent before, whole from the onset on) or, for the drifts (``"ramp"``), as a drift
+    that starts there. 0 (the default) or less: present from the start, bit-identical to the effect
+    without an onset.
+    """
 
     _params: ClassVar[tuple[str, ...]] = ()
+    ONSET_KIND: ClassVar[str] = "step"
 
-    def __init__(self, enabled: bool = True) -> None:
+    def __init__(self, enabled: bool = True, onset_s: float = 0.0) -> None:
         self.enabled = bool(enabled)
+        self.onset_s = _scalar(getattr(self, "name", "effect"), "onset_s", onset_s)
+
+    def _on(self, t_s: np.ndarray) -> np.ndarray | None:
+        """(n,) True from the onset on; None when the effect is present from the start."""
+        if self.onset_s <= 0.0:
+            return None
+        return np.asarray(t_s, dtype=np.float64) >= self.onset_s
+
+    def _stepped(self, t_s: np.ndarray, change: np.ndarray) -> np.ndarray:
+        """``change`` (leading axis n) from the onset on, zero before."""
+        on = self._on(t_s)
+        if on is None:
+            return change
+        return change * on.reshape(on.shape + (1,) * (np.ndim(change) - 1))
+
+    def _clock(self, t_s: np.ndarray) -> np.ndarray:
+        """Time of a drift that starts at the onset: ``max(t, onset)`` (t itself without an onset)."""
+        t = np.asarray(t_s, dtype=np.float64)
+        return t if self.onset_s <= 0.0 else np.maximum(t, self.onset_s)
 
     @property
     def active(self) -> bool:
@@ -148,7 +174,7 @@ class _CatalogEffect(Effect):
     def to_dict(self) -> dict[str, object]:
         """Name, type and every parameter (lists for arrays)."""
         out: dict[str, object] = {"name": self.name, "type": type(self).__name__, "enabled": self.enabled}
-        for key in self._params:
+        for key in (*self._params, *(("onset_s",) if self.onset_s else ())):
             value = getattr(self, key)
             out[key] = value.tolist() if isinstance(value, np.ndarray) else value
         return out
@@ -182,10 +208,11 @@ class ScaleFactorDrift(_CatalogEffect):
 
     name = "scale_factor_drift"
     _params = ("rate_per_s", "grs", "axis", "t_ref_s")
+    ONSET_KIND = "ramp"
 
     def __init__(self, rate_per_s: float = 0.0, grs: int = 1, axis: str = "x", t_ref_s: float = 0.0,
-                 enabled: bool = True) -> None:
-        super().__init__(enabled)
+                 enabled: bool = True, onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.rate_per_s = _scalar(self.name, "rate_per_s", rate_per_s)
         self.grs = _grs(self.name, grs)
         self.axis = _choice(self.name, "axis", axis, ELECTRODE_PAIRS)
@@ -199,7 +226,7 @@ class ScaleFactorDrift(_CatalogEffect):
                           linear_scale_factors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if not self.active or grs_id != self.grs:
             return angular_scale_factors, linear_scale_factors
-        factor = 1.0 + self.rate_per_s * (np.asarray(t_s, dtype=np.float64) - self.t_ref_s)
+        factor = 1.0 + self.rate_per_s * (self._clock(t_s) - self.t_ref_s)
         angular_index, linear_index = ELECTRODE_PAIRS[self.axis]
         count = factor.shape[0]
         angular = np.array(np.broadcast_to(angular_scale_factors, (count, 3)))
@@ -234,8 +261,8 @@ class CrossCoupling(_CatalogEffect):
     _params = ("grs", "misalignment_rad", "imbalance")
 
     def __init__(self, grs: int = 1, misalignment_rad: ArrayLike = 0.0, imbalance: ArrayLike = 0.0,
-                 enabled: bool = True) -> None:
-        super().__init__(enabled)
+                 enabled: bool = True, onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.grs = _grs(self.name, grs)
         self.misalignment_rad = _vector(self.name, "misalignment_rad", misalignment_rad)
         self.imbalance = _vector(self.name, "imbalance", imbalance)
@@ -249,7 +276,11 @@ class CrossCoupling(_CatalogEffect):
         if not self.active or grs_id != self.grs or not np.any(self.misalignment_rad):
             return angular_rad_s2, linear_m_s2
         eps = self.misalignment_rad
-        return angular_rad_s2 - cross(eps, angular_rad_s2), linear_m_s2 - cross(eps, linear_m_s2)
+        on = self._on(t_s)
+        if on is None:
+            return angular_rad_s2 - cross(eps, angular_rad_s2), linear_m_s2 - cross(eps, linear_m_s2)
+        step = on[:, None].astype(np.float64)
+        return angular_rad_s2 - step * cross(eps, angular_rad_s2), linear_m_s2 - step * cross(eps, linear_m_s2)
 
     def grs_voltages_v(self, t_s: np.ndarray, grs_id: int, voltages_v: np.ndarray) -> np.ndarray:
         if not self.active or grs_id != self.grs or not np.any(self.imbalance):
@@ -257,7 +288,10 @@ class CrossCoupling(_CatalogEffect):
         gains = np.empty(6)
         gains[0::2] = 1.0 + self.imbalance
         gains[1::2] = 1.0 - self.imbalance
-        return voltages_v * gains
+        on = self._on(t_s)
+        if on is None:
+            return voltages_v * gains
+        return voltages_v * np.where(on[:, None], gains, 1.0)
 
 
 class ReadoutNonlinearity(_CatalogEffect):
@@ -278,8 +312,9 @@ class ReadoutNonlinearity(_CatalogEffect):
     name = "readout_nonlinearity"
     _params = ("k", "grs", "readout")
 
-    def __init__(self, k: float = 0.0, grs: int = 1, readout: str = "x", enabled: bool = True) -> None:
-        super().__init__(enabled)
+    def __init__(self, k: float = 0.0, grs: int = 1, readout: str = "x", enabled: bool = True,
+                 onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.k = _scalar(self.name, "k", k)
         self.grs = _grs(self.name, grs)
         self.readout = _choice(self.name, "readout", readout, ANGULAR_READOUTS + LINEAR_READOUTS)
@@ -295,11 +330,11 @@ class ReadoutNonlinearity(_CatalogEffect):
         if self.readout in ANGULAR_READOUTS:
             index = ANGULAR_READOUTS.index(self.readout)
             angular = np.array(angular_rad_s2, dtype=np.float64)
-            angular[:, index] = angular[:, index] + self.k * angular[:, index] ** 2
+            angular[:, index] = angular[:, index] + self._stepped(t_s, self.k * angular[:, index] ** 2)
             return angular, linear_m_s2
         index = LINEAR_READOUTS.index(self.readout)
         linear = np.array(linear_m_s2, dtype=np.float64)
-        linear[:, index] = linear[:, index] + self.k * linear[:, index] ** 2
+        linear[:, index] = linear[:, index] + self._stepped(t_s, self.k * linear[:, index] ** 2)
         return angular_rad_s2, linear
 
 
@@ -359,8 +394,8 @@ class TmStiffness(_CatalogEffect):
     _params = ("stiffness_s2", "grs", "axis", "suspension_hz", "damping")
 
     def __init__(self, stiffness_s2: float = 0.0, grs: int = 1, axis: str = "x", suspension_hz: float = 0.01,
-                 damping: float = 0.7, enabled: bool = True) -> None:
-        super().__init__(enabled)
+                 damping: float = 0.7, enabled: bool = True, onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.stiffness_s2 = _scalar(self.name, "stiffness_s2", stiffness_s2)
         self.grs = _grs(self.name, grs)
         self.axis = _choice(self.name, "axis", axis, LINEAR_READOUTS)
@@ -387,7 +422,7 @@ class TmStiffness(_CatalogEffect):
         b, a = self._coefficients
         lag, self._state = lfilter(b, a, linear_m_s2[:, index], zi=self._state)
         linear = np.array(linear_m_s2, dtype=np.float64)
-        linear[:, index] = linear[:, index] - self.stiffness_s2 * lag
+        linear[:, index] = linear[:, index] - self._stepped(t_s, self.stiffness_s2 * lag)
         return angular_rad_s2, linear
 
 
@@ -415,8 +450,9 @@ class ThrusterTorqueGain(_CatalogEffect):
     name = "thruster_torque_gain"
     _params = ("gain",)
 
-    def __init__(self, gain: ArrayLike = 0.0, axis: str | None = None, enabled: bool = True) -> None:
-        super().__init__(enabled)
+    def __init__(self, gain: ArrayLike = 0.0, axis: str | None = None, enabled: bool = True,
+                 onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         if axis is not None:
             _choice(self.name, "axis", axis, _AXES)
             vector = np.zeros(3)
@@ -432,7 +468,10 @@ class ThrusterTorqueGain(_CatalogEffect):
     def applied_torque_n_m(self, t_s: np.ndarray, torque_n_m: np.ndarray) -> np.ndarray:
         if not self.active:
             return torque_n_m
-        return torque_n_m * (1.0 + self.gain)
+        on = self._on(t_s)
+        if on is None:
+            return torque_n_m * (1.0 + self.gain)
+        return torque_n_m * (1.0 + np.outer(on, self.gain))
 
 
 class InertiaError(_CatalogEffect):
@@ -454,8 +493,9 @@ class InertiaError(_CatalogEffect):
     name = "inertia_error"
     _params = ("relative", "products_kg_m2")
 
-    def __init__(self, relative: ArrayLike = 0.0, products_kg_m2: ArrayLike = 0.0, enabled: bool = True) -> None:
-        super().__init__(enabled)
+    def __init__(self, relative: ArrayLike = 0.0, products_kg_m2: ArrayLike = 0.0, enabled: bool = True,
+                 onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.relative = _vector(self.name, "relative", relative)
         self.products_kg_m2 = _vector(self.name, "products_kg_m2", products_kg_m2)
         self._true: np.ndarray | None = None
@@ -480,6 +520,12 @@ class InertiaError(_CatalogEffect):
     def inertia_kg_m2(self, t_s: np.ndarray, inertia_kg_m2: np.ndarray) -> np.ndarray:
         if not self.active:
             return inertia_kg_m2
+        on = self._on(t_s)
+        if on is not None:
+            if inertia_kg_m2.ndim == 2:
+                return np.where(on[:, None, None], self.true_inertia(inertia_kg_m2), inertia_kg_m2[None])
+            return np.stack([self.true_inertia(j) if o else np.array(j)
+                             for j, o in zip(inertia_kg_m2, on, strict=True)])
         if inertia_kg_m2.ndim == 2:
             return self.true_inertia(inertia_kg_m2)
         return np.stack([self.true_inertia(j) for j in inertia_kg_m2])
@@ -515,8 +561,8 @@ class GravityGradient(_CatalogEffect):
     _params = ("orbit_period_s", "orbit_normal", "phase_rad", "scale")
 
     def __init__(self, orbit_period_s: float = 86164.1, orbit_normal: ArrayLike = (0.3, 0.2, 0.93),
-                 phase_rad: float = 0.0, scale: float = 1.0, enabled: bool = True) -> None:
-        super().__init__(enabled)
+                 phase_rad: float = 0.0, scale: float = 1.0, enabled: bool = True, onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.orbit_period_s = _scalar(self.name, "orbit_period_s", orbit_period_s, positive=True)
         normal = _vector(self.name, "orbit_normal", orbit_normal)
         norm = float(np.linalg.norm(normal))
@@ -572,7 +618,7 @@ class GravityGradient(_CatalogEffect):
     def applied_torque_n_m(self, t_s: np.ndarray, torque_n_m: np.ndarray) -> np.ndarray:
         if not self.active:
             return torque_n_m
-        return torque_n_m + self.torque_n_m(t_s)
+        return torque_n_m + self._stepped(t_s, self.torque_n_m(t_s))
 
 
 class ComDrift(_CatalogEffect):
@@ -595,9 +641,11 @@ class ComDrift(_CatalogEffect):
 
     name = "com_drift"
     _params = ("rate_m_s", "grs", "t_ref_s")
+    ONSET_KIND = "ramp"
 
-    def __init__(self, rate_m_s: ArrayLike = 0.0, grs: int = 0, t_ref_s: float = 0.0, enabled: bool = True) -> None:
-        super().__init__(enabled)
+    def __init__(self, rate_m_s: ArrayLike = 0.0, grs: int = 0, t_ref_s: float = 0.0, enabled: bool = True,
+                 onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.rate_m_s = _vector(self.name, "rate_m_s", rate_m_s)
         self.grs = _grs(self.name, grs, allow_both=True)
         self.t_ref_s = _scalar(self.name, "t_ref_s", t_ref_s)
@@ -609,7 +657,7 @@ class ComDrift(_CatalogEffect):
     def com_offset_m(self, t_s: np.ndarray, grs_id: int, com_offset_m: np.ndarray) -> np.ndarray:
         if not self.active or (self.grs and grs_id != self.grs):
             return com_offset_m
-        elapsed = np.asarray(t_s, dtype=np.float64) - self.t_ref_s
+        elapsed = self._clock(t_s) - self.t_ref_s
         return com_offset_m + elapsed[:, None] * self.rate_m_s
 
 
@@ -630,8 +678,8 @@ class ThrusterForceLeakage(_CatalogEffect):
     name = "thruster_force_leakage"
     _params = ("leakage_per_m",)
 
-    def __init__(self, leakage_per_m: ArrayLike = 0.0, enabled: bool = True) -> None:
-        super().__init__(enabled)
+    def __init__(self, leakage_per_m: ArrayLike = 0.0, enabled: bool = True, onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         matrix = np.asarray(leakage_per_m, dtype=np.float64)
         if matrix.ndim == 0:
             matrix = np.full((3, 3), float(matrix))
@@ -655,7 +703,7 @@ class ThrusterForceLeakage(_CatalogEffect):
     def spacecraft_acceleration_m_s2(self, t_s: np.ndarray, a_sc_m_s2: np.ndarray) -> np.ndarray:
         if not self.active or self._torque is None:
             return a_sc_m_s2
-        return a_sc_m_s2 + self._torque @ self.leakage_per_m.T / self._mass_kg
+        return a_sc_m_s2 + self._stepped(t_s, self._torque @ self.leakage_per_m.T / self._mass_kg)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -685,8 +733,8 @@ class TimeOffset(_CatalogEffect):
     name = "time_offset"
     _params = ("offset_s",)
 
-    def __init__(self, offset_s: float = 0.0, enabled: bool = True) -> None:
-        super().__init__(enabled)
+    def __init__(self, offset_s: float = 0.0, enabled: bool = True, onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.offset_s = _scalar(self.name, "offset_s", offset_s)
         self._dt_s = 0.1
         self._inertia_inv: np.ndarray | None = None
@@ -749,10 +797,54 @@ class TimeOffset(_CatalogEffect):
         else:
             lead = -self.offset_s
             rotation = lead * omega + 0.5 * lead * lead * acc
-        return quat_multiply(quat_xyzw, quat_from_rotvec(rotation))
+        return quat_multiply(quat_xyzw, quat_from_rotvec(self._stepped(t_s, rotation)))
 
 
-class ActuationDelay(_CatalogEffect):
+class _ActuationFromOnset(_CatalogEffect):
+    """A timing effect with an onset: the applied torque changes from the onset on.
+
+    Present from the start, a latency or lag is a timing convention the simulator applies itself
+    (:meth:`timing`). From an onset on, it acts through :meth:`applied_torque_n_m`: the torque the
+    hook receives (command through the configured timing, plus thruster noise) is passed through the
+    extra delay and lag (:func:`~.timing.actuated_commands`, on the hook's own time step), and
+    replaces the torque from the onset on (a thruster whose latency or response changes mid-run).
+    Exact in batch; in streaming blocks a history of the taps is kept (a negative delay needs
+    later torques, i.e. batch simulation).
+    """
+
+    def _extra(self) -> tuple[float, float]:
+        raise NotImplementedError
+
+    def bind(self, config: SimConfig, seed: int) -> None:
+        self._dt_s = config.dt_s
+        self._history = np.zeros((0, 3))
+        self._calls = 0
+
+    def _from_onset(self) -> bool:
+        return self.active and self.onset_s > 0.0
+
+    def applied_torque_n_m(self, t_s: np.ndarray, torque_n_m: np.ndarray) -> np.ndarray:
+        if not self._from_onset() or torque_n_m.shape[0] == 0:
+            return torque_n_m
+        from .timing import actuated_commands, actuation_weights
+
+        t = np.asarray(t_s, dtype=np.float64)
+        dt = float(t[1] - t[0]) if t.shape[0] > 1 else getattr(self, "_dt_s", 0.1)
+        delay_s, lag_s = self._extra()
+        self._calls = getattr(self, "_calls", 0) + 1
+        if delay_s < 0.0 and self._calls > 1:
+            raise RuntimeError(f"{self.name}: a negative delay from an onset needs the whole torque series "
+                               "(batch simulation)")
+        history = getattr(self, "_history", np.zeros((0, 3)))
+        series = np.concatenate((history, torque_n_m))
+        moved = actuated_commands(series, delay_s, lag_s, dt, before=series[0])[history.shape[0]:]
+        m_first, weights = actuation_weights(delay_s, lag_s, dt)
+        keep = max(m_first + weights.size, 1)
+        self._history = series[-keep:]
+        return np.where((t >= self.onset_s)[:, None], moved, torque_n_m)
+
+
+class ActuationDelay(_ActuationFromOnset):
     """The applied torque lags the command by ``delay_s`` (thruster latency, command transport).
 
     A timing effect: it adds to ``timing.actuation_latency_s`` and the simulator applies the
@@ -763,19 +855,24 @@ class ActuationDelay(_CatalogEffect):
     name = "actuation_delay"
     _params = ("delay_s",)
 
-    def __init__(self, delay_s: float = 0.0, enabled: bool = True) -> None:
-        super().__init__(enabled)
+    def __init__(self, delay_s: float = 0.0, enabled: bool = True, onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.delay_s = _scalar(self.name, "delay_s", delay_s)
 
     @property
     def active(self) -> bool:
         return self.enabled and self.delay_s != 0.0
 
+    def _extra(self) -> tuple[float, float]:
+        return self.delay_s, 0.0
+
     def timing(self, timing: TimingConfig) -> TimingConfig:
-        return replace(timing, actuation_latency_s=timing.actuation_latency_s + self.delay_s) if self.active else timing
+        if not self.active or self.onset_s > 0.0:
+            return timing
+        return replace(timing, actuation_latency_s=timing.actuation_latency_s + self.delay_s)
 
 
-class ThrusterResponse(_CatalogEffect):
+class ThrusterResponse(_ActuationFromOnset):
     """First-order response of the thrust, time constant ``time_constant_s`` (rise time 2.2 T).
 
     A timing effect: it adds to ``timing.thruster_time_constant_s``.
@@ -784,8 +881,8 @@ class ThrusterResponse(_CatalogEffect):
     name = "thruster_response"
     _params = ("time_constant_s",)
 
-    def __init__(self, time_constant_s: float = 0.0, enabled: bool = True) -> None:
-        super().__init__(enabled)
+    def __init__(self, time_constant_s: float = 0.0, enabled: bool = True, onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.time_constant_s = _scalar(self.name, "time_constant_s", time_constant_s)
         if self.time_constant_s < 0.0:
             raise EffectParameterError(self.name, "time_constant_s", f"must be >= 0, got {time_constant_s!r}")
@@ -794,8 +891,11 @@ class ThrusterResponse(_CatalogEffect):
     def active(self) -> bool:
         return self.enabled and self.time_constant_s != 0.0
 
+    def _extra(self) -> tuple[float, float]:
+        return 0.0, self.time_constant_s
+
     def timing(self, timing: TimingConfig) -> TimingConfig:
-        if not self.active:
+        if not self.active or self.onset_s > 0.0:
             return timing
         return replace(timing, thruster_time_constant_s=timing.thruster_time_constant_s + self.time_constant_s)
 
@@ -810,9 +910,13 @@ class GrsTimeOffset(_CatalogEffect):
     name = "grs_time_offset"
     _params = ("offset_s",)
 
-    def __init__(self, offset_s: float = 0.0, enabled: bool = True) -> None:
-        super().__init__(enabled)
+    def __init__(self, offset_s: float = 0.0, enabled: bool = True, onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.offset_s = _scalar(self.name, "offset_s", offset_s)
+        if self.onset_s > 0.0:
+            raise EffectParameterError(self.name, "onset_s", "a GRS stamp convention that changes during the run is "
+                                       "not simulated; give its reduction, actuation_delay and time_offset "
+                                       "(-offset_s) with the same onset (docs/interfaces.md)")
 
     @property
     def active(self) -> bool:
@@ -847,8 +951,8 @@ class StarTrackerLowFreqNoise(_CatalogEffect):
     _params = ("knee_hz", "corner_hz", "axes")
 
     def __init__(self, knee_hz: float = 0.0, corner_hz: float = 1e-5, axes: ArrayLike = (1.0, 1.0, 1.0),
-                 enabled: bool = True) -> None:
-        super().__init__(enabled)
+                 enabled: bool = True, onset_s: float = 0.0) -> None:
+        super().__init__(enabled, onset_s)
         self.knee_hz = _scalar(self.name, "knee_hz", knee_hz)
         if self.knee_hz < 0.0:
             raise EffectParameterError(self.name, "knee_hz", f"must be >= 0, got {knee_hz!r}")
@@ -885,6 +989,8 @@ class StarTrackerLowFreqNoise(_CatalogEffect):
         self._decay = decay
         self._innovation_std = innovation * self.axes
         self._state = stationary * self.axes * self._rng.standard_normal(3)
+        if self.onset_s > 0.0:  # the extra error starts at the onset, from zero (no attitude jump)
+            self._state = np.zeros(3)
 
     def star_tracker_quat_xyzw(self, t_s: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
         if not self.active:
@@ -892,7 +998,7 @@ class StarTrackerLowFreqNoise(_CatalogEffect):
         if self._rng is None:
             raise RuntimeError("star_tracker_lowfreq_noise: bind() was not called")
         count = quat_xyzw.shape[0]
-        innovations = self._innovation_std * self._rng.standard_normal((count, 3))
+        innovations = self._stepped(t_s, self._innovation_std * self._rng.standard_normal((count, 3)))
         following, _ = lfilter([1.0], [1.0, -self._decay], innovations, axis=0,
                                zi=(self._decay * self._state)[None, :])
         values = np.concatenate((self._state[None, :], following[:-1]), axis=0)

@@ -92,7 +92,7 @@ def _timing(config: SimConfig, effects: Sequence[Effect]) -> tuple[float, float,
     st_extra = 0.0
     for effect in effects:
         if isinstance(effect, TimeOffset):
-            st_extra += effect.offset_s if effect.active else 0.0
+            st_extra += effect.offset_s if effect.active and effect.onset_s <= 0.0 else 0.0
         else:
             timing = effect.timing(timing)
     timing = replace(timing, star_tracker_stamp_offset_s=timing.star_tracker_stamp_offset_s + st_extra)
@@ -142,7 +142,9 @@ def simulate_reference(config: SimConfig, seed: int, torque_cmd_n_m: ArrayLike, 
     exposure_s = dt if settings.st_exposure_s is None else settings.st_exposure_s
     # internal grid: idle before t0 and the last command held after the record, wide enough for
     # every filter window and stamp offset
-    reach = fir_half_s + exposure_s + abs(grs_stamp_s) + abs(st_offset_s) + 2.0 * dt
+    onset_offsets = [abs(e.offset_s) for e in effects if getattr(e, "name", "") == "time_offset"
+                     and getattr(e, "onset_s", 0.0) > 0.0]
+    reach = fir_half_s + exposure_s + abs(grs_stamp_s) + abs(st_offset_s) + sum(onset_offsets) + 2.0 * dt
     pad = math.ceil(reach / dt) + 1
     samples = np.concatenate((np.zeros((pad, 3)), command, np.repeat(command[-1:], pad, axis=0)))
     t_start = t0_s - pad * dt
@@ -229,7 +231,12 @@ def simulate_reference(config: SimConfig, seed: int, torque_cmd_n_m: ArrayLike, 
             fields[key][:, index] = value
 
     # star tracker: attitude averaged over the exposure ---------------------------------------------
+    from .effect_catalog import TimeOffset
+
     reads = stamps - st_offset_s
+    for effect in effects:  # a star-tracker offset from an onset on (before it: the conventions')
+        if isinstance(effect, TimeOffset) and effect.active and effect.onset_s > 0.0:
+            reads = reads - np.where(stamps >= effect.onset_s, effect.offset_s, 0.0)
     points = (np.arange(settings.st_exposure_points) + 0.5) / settings.st_exposure_points - 0.5
     fine_end = fine_start + h
     reference_quat = _attitude_at(reads, fine_end, attitude, rest)
@@ -240,8 +247,6 @@ def simulate_reference(config: SimConfig, seed: int, torque_cmd_n_m: ArrayLike, 
         mean_rotvec += rotvec_from_quat(quat_multiply(conj, q)) / points.size
     true_quat = quat_multiply(reference_quat, quat_from_rotvec(mean_rotvec))
     st_quat = star_tracker_measurement(true_quat, readout_noise.star_tracker_rad)
-    from .effect_catalog import TimeOffset
-
     for effect in effects:
         if not isinstance(effect, TimeOffset):
             st_quat = effect.star_tracker_quat_xyzw(stamps, st_quat)
