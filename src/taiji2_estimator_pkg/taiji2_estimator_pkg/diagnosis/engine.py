@@ -917,8 +917,8 @@ def _joint_timing(full: Record, accepted: Sequence[Candidate], current: Sequence
     if lag is None or not delays or lag.exact is None:
         return
     delay = max(delays, key=lambda c: abs(full.secant.get(c.key, 0.0)))
-    if delay.exact is None:
-        return
+    if delay.exact is None or lag.key in full.onsets or delay.key in full.onsets:
+        return  # an onset: the joint signature from the start does not apply (each is fitted alone)
     free = [name for name in current if name not in delay.column_names() + lag.column_names()]
     ctx, t0 = full.ctx, full.model.time_constant_s
 

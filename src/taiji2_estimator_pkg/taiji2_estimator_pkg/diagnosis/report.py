@@ -159,11 +159,14 @@ def _markdown(result: DiagnosisResult, files: list[str]) -> str:
     if remaining:
         lines += ["Locations significant in a fresh scan, or strong gaps of the nominal model still open "
                   f"(stage 2, threshold {result.verdict.get('recheck_threshold', float('nan')):.2f}):", "",
-                  "| channel | view | band [Hz] | kind | segment | gap | significance |",
-                  "|---|---|---|---|---|---|---|"]
+                  "| channel | view | band [Hz] | kind | segment | time window [s] | gap | significance |",
+                  "|---|---|---|---|---|---|---|---|"]
         for loc in remaining[:10]:
+            window = (f"{loc['window_s'][0]:.0f}-{loc['window_s'][1]:.0f} (+- {loc['window_resolution_s']:.2g})"
+                      if "window_s" in loc else "-")
             lines.append(f"| {loc['channel']} | {loc['view']} | {loc['band_hz'][0]:.3g}-{loc['band_hz'][1]:.3g} | "
-                         f"{loc['kind']} | {loc['segment']} | {loc['gap']:.3f} | {loc['significance']:.2f} |")
+                         f"{loc['kind']} | {loc['segment']} | {window} | {loc['gap']:.3f} | "
+                         f"{loc['significance']:.2f} |")
     else:
         lines.append("No significant location remains.")
     lines += ["", "## Files", ""] + [f"- `{name}`" for name in files]
