@@ -49,7 +49,8 @@ def test_ros2_bag_record_is_calibrated_and_the_recorders_bag_is_played_by_ros2_b
     recorders = {
         "ros2 bag record": ros(f"exec ros2 bag record -s {storage} {options} --qos-profile-overrides-path "
                                f"{QOS_OVERRIDES} -o {theirs} {topics}", background=True),
-        "taiji2 bag record": ros(f"exec python3 -m taiji2_runtime.cli.main bag record -o {ours} {topics}",
+        # -a: also rosbag2's /events/write_split (Jazzy's WriteSplitEvent, which Humble defines otherwise)
+        "taiji2 bag record": ros(f"exec python3 -m taiji2_runtime.cli.main bag record -a -o {ours}",
                                  env={"TAIJI2_RUNTIME": "cyclonedds"}, background=True),
     }
     commander = ros("exec ros2 run taiji2_sim_pkg maneuver_commander --ros-args -p use_sim_time:=true "
@@ -69,6 +70,12 @@ def test_ros2_bag_record_is_calibrated_and_the_recorders_bag_is_played_by_ros2_b
     from taiji2_estimator_pkg.io import load_raw_bag
 
     mine, their = load_raw_bag(ours), load_raw_bag(theirs)
+    # rosbags' AnyReader recomputes every type hash from the embedded definition (issue 26 row 4)
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([ours]) as reader:
+        recorded = {c.topic: c.msgtype for c in reader.connections}
+    assert set(RAW_TOPICS) <= set(recorded), recorded
     assert their.storage == storage
     for name in ("star_tracker", "grs1", "grs2"):
         a, b = (getattr(x, name) for x in (mine, their))

@@ -128,6 +128,21 @@ def _hash_typestore() -> Typestore:
     return store
 
 
+def rosidl_hash_typestore() -> Typestore:
+    """Jazzy's definitions and this workspace's as rosidl hashes them (``char`` as ``uint8``)."""
+    return _hash_typestore()
+
+
+@cache
+def jazzy_typestore() -> Typestore:
+    """Jazzy's standard definitions as written, plus this workspace's messages."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    for package in WORKSPACE_INTERFACE_PACKAGES:
+        for msgtype, text in workspace_msg_definitions(package).items():
+            store.register(get_types_from_msg(text, msgtype))
+    return store
+
+
 def register_for_hashing(definitions: dict) -> None:
     """Add rosbags type definitions (e.g. service request/response bodies) to the hashing store."""
     store = _hash_typestore()

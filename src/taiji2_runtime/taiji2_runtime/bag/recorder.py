@@ -38,7 +38,7 @@ from .runtime_adapter import (
     subscription_qos,
     to_cdr,
 )
-from .writer import BagWriter
+from .writer import BagWriter, DefinitionUnavailable
 
 
 @dataclass
@@ -252,7 +252,11 @@ class Recorder:
         msgtype = usable[0]
         if len(types) > 1:
             self._log(f"warning: {topic} is published with several types ({', '.join(types)}); recording {msgtype}")
-        handle = self.writer.add_topic(topic, msgtype, offered)
+        try:
+            handle = self.writer.add_topic(topic, msgtype, offered)
+        except DefinitionUnavailable as exc:  # a definition and its hash from one source, or not the topic
+            self._skip(topic, str(exc).strip("'\""))
+            return
         cls = message_class(msgtype)
         on_message = self._make_callback(topic, handle)
         self._subscriptions[topic] = self.node.create_subscription(

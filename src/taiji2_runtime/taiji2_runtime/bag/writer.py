@@ -44,14 +44,45 @@ from rosbags.typesys.store import Typestore
 from .errors import BagError
 
 
-def _type_hash(store: Typestore, msgtype: str) -> str:
-    """rosidl's hash where the workspace knows the type (Jazzy definitions, char as uint8), else the store's."""
-    from taiji2_runtime.typestore import rihs01
+class DefinitionUnavailable(KeyError):
+    """No message definition whose type hash is the one the graph uses for the type (the topic is left out)."""
 
+
+def definition_and_hash(store: Typestore, msgtype: str) -> tuple[str, str]:
+    """The definition to embed for ``msgtype`` and its type hash, both from one type store.
+
+    The hash must be that of the embedded definition (readers such as rosbags' ``AnyReader`` recompute it and
+    refuse the whole bag otherwise) and the definition must be the one on the wire. On the wire the type is
+    rosidl's Jazzy one (``typestore.rihs01``, what every endpoint advertises), so the first of ``store`` (the
+    workspace's: Humble's standard definitions), Jazzy's definitions, and Jazzy's as rosidl hashes them (``char``
+    as ``uint8``) whose hash equals it is used: e.g. ``rosbag2_interfaces/msg/WriteSplitEvent``, which Jazzy
+    extended, gets Jazzy's definition with Jazzy's hash. With ``ROS_DISTRO=humble`` (no hashes on the wire)
+    ``store``'s definition is embedded with its own hash; a type only ``store`` knows (registered from a bag)
+    likewise.
+
+    Raises
+    ------
+    KeyError
+        ``msgtype`` is unknown to ``store``.
+    DefinitionUnavailable
+        no known definition has the graph's hash.
+    """
+    from taiji2_runtime.typestore import jazzy_typestore, rihs01, rosidl_hash_typestore
+
+    if msgtype not in store.fielddefs:
+        raise KeyError(f"message type {msgtype!r} is unknown to the type store")
     try:
-        return rihs01(msgtype)
+        wire = None if os.environ.get("ROS_DISTRO") == "humble" else rihs01(msgtype)
     except KeyError:
-        return store.hash_rihs01(msgtype)
+        wire = None
+    for candidate in (store, jazzy_typestore(), rosidl_hash_typestore()):
+        if msgtype not in candidate.fielddefs:
+            continue
+        digest = candidate.hash_rihs01(msgtype)
+        if wire is None or digest == wire:
+            return candidate.generate_msgdef(msgtype, ros_version=2)[0], digest
+    raise DefinitionUnavailable(f"no definition of {msgtype} with the graph's type hash {wire}")
+
 
 STORAGES = {"mcap": (StoragePlugin.MCAP, ".mcap"), "sqlite3": (StoragePlugin.SQLITE3, ".db3")}
 _VERSION = 8
@@ -207,11 +238,8 @@ class BagWriter:
         key = (topic, msgtype)
         if key in self._by_name:
             return self._by_name[key]
-        if msgtype not in self._store.fielddefs:
-            raise KeyError(f"message type {msgtype!r} is unknown to the type store")
-        msgdef, _ = self._store.generate_msgdef(msgtype, ros_version=2)
-        entry = _Topic(len(self._topics), topic, msgtype, msgdef, _type_hash(self._store, msgtype),
-                       list(offered_qos or []))
+        msgdef, digest = definition_and_hash(self._store, msgtype)
+        entry = _Topic(len(self._topics), topic, msgtype, msgdef, digest, list(offered_qos or []))
         self._topics.append(entry)
         self._by_name[key] = entry.handle
         for open_file in (self._segment, self._journal):
