@@ -15,7 +15,7 @@ Two studies:
    10 % at 50 seeds).
 
     python benchmarks/bench_link.py [--studies graph,mc] [--seeds 50] [--duration-s 10800]
-                                    [--graph-duration-s 86400] [--out DIR]
+                                    [--graph-duration-s 86400] [--out DIR] [--baseline]
 """
 
 from __future__ import annotations
@@ -60,6 +60,16 @@ def delivered_masks(model, seed: int, n: int, dt_s: float) -> list[np.ndarray]:
     return [kept[apid] for apid, _ in SENSORS]
 
 
+def _z(table: dict, out) -> np.ndarray:
+    """(12,) (estimate - truth) / sigma of G (both GRS) then d (both GRS)."""
+    g = np.concatenate([table[f"grs{k}"]["scale_factors"] for k in (1, 2)])
+    g_sig = np.concatenate([np.sqrt(np.diag(table[f"grs{k}"]["scale_factors_cov"])) for k in (1, 2)])
+    d = np.concatenate([table[f"grs{k}"]["com_offset"] for k in (1, 2)])
+    d_sig = np.concatenate([np.sqrt(np.diag(table[f"grs{k}"]["com_offset_cov"])) for k in (1, 2)])
+    return np.concatenate([(g - out.truth.grs_angular_scale_factors[-1].reshape(-1)) / g_sig,
+                           (d - out.truth.com_offset_m[-1].reshape(-1)) / d_sig])
+
+
 def mc(args: argparse.Namespace) -> None:
     config = load_config("type1", overrides={"maneuver.duration_s": args.duration_s})
     n = round(args.duration_s * config.sample_rate_hz)
@@ -67,7 +77,7 @@ def mc(args: argparse.Namespace) -> None:
     commands = maneuver_torque_commands(config, n)
     instrument = InstrumentModel.from_layout("type1")
     model = load_link_model("deep_space")
-    z_g, z_d, lost = [], [], []
+    z_g, z_d, lost, z_full = [], [], [], []
     started = time.monotonic()
     for i in range(args.seeds):
         seed = 5000 + i
@@ -78,6 +88,11 @@ def mc(args: argparse.Namespace) -> None:
         record = align_streams(stamps[keep_st], out.st_quat_xyzw[keep_st],
                                {1: (stamps[keep_1], out.voltages_v[keep_1, 0]),
                                 2: (stamps[keep_2], out.voltages_v[keep_2, 1])}, instrument.sample_rate_hz)
+        if args.baseline:  # the same seed without the link: the paired difference isolates the link's effect
+            full = calibrate(align_streams(stamps, out.st_quat_xyzw, {1: (stamps, out.voltages_v[:, 0]),
+                                                                      2: (stamps, out.voltages_v[:, 1])},
+                                           instrument.sample_rate_hz), instrument).to_dict()
+            z_full.append(_z(full, out))
         table = calibrate(record, instrument).to_dict()
         g = np.concatenate([table[f"grs{k}"]["scale_factors"] for k in (1, 2)])
         g_sig = np.concatenate([np.sqrt(np.diag(table[f"grs{k}"]["scale_factors_cov"])) for k in (1, 2)])
@@ -101,6 +116,13 @@ def mc(args: argparse.Namespace) -> None:
         ok &= good
         print(f"  {name:14s} mean err/sigma {mean:+.3f}  std err/sigma {std:.3f}  {'ok' if good else 'MISS'}")
     print(f"  goal (mean within +-0.3, std in [0.85, 1.15]) {'met' if ok else 'NOT met'} for every parameter")
+    if z_full:
+        zf = np.array(z_full)
+        print("  the same seeds without the link (complete records), and the link's paired effect:")
+        for j, name in enumerate(names):
+            diff = z[:, j] - zf[:, j]
+            print(f"  {name:14s} complete: mean {zf[:, j].mean():+.3f} std {zf[:, j].std(ddof=1):.3f};  "
+                  f"with link - complete: mean {diff.mean():+.3f} std {diff.std(ddof=1):.3f}")
 
 
 def fluid_ground_time_s(x_s: float, model, rate_in_bps: float, first_data_s: float = 0.0) -> float:
@@ -180,6 +202,8 @@ def main() -> None:
     parser.add_argument("--duration-s", type=float, default=10800.0, help="MC record length [s]")
     parser.add_argument("--graph-duration-s", type=float, default=86400.0)
     parser.add_argument("--out", default="")
+    parser.add_argument("--baseline", action="store_true",
+                        help="MC: also calibrate each seed's complete record (the link's paired effect)")
     args = parser.parse_args()
     from taiji2_runtime.threads import limit_blas_threads
 
