@@ -33,6 +33,8 @@ def _fill(store, msgtype: str, rng: np.random.Generator, ours: object):
             base = args[0]
             if base == "string":
                 value = "tmrf" + str(int(rng.integers(0, 10**int(rng.integers(0, 6)))))
+            elif base == "bool":
+                value = bool(rng.integers(0, 2))
             elif base.startswith("float"):
                 value = float(rng.normal() * 10.0 ** rng.integers(-12, 3))
             elif base.startswith("uint"):
@@ -44,6 +46,12 @@ def _fill(store, msgtype: str, rng: np.random.Generator, ours: object):
         elif kind == 3:
             values = rng.normal(size=args[1]) * 1e-9
             setattr(ours, name, [float(v) for v in values])
+            kwargs[name] = values
+        elif kind == 4 and args[0][1][0] in ("uint8", "int64"):  # unbounded sequence (SpacePackets)
+            dtype = np.uint8 if args[0][1][0] == "uint8" else np.int64
+            high = 256 if dtype is np.uint8 else 2**62
+            values = rng.integers(0, high, size=int(rng.integers(0, 300)), dtype=dtype)
+            setattr(ours, name, [int(v) for v in values])
             kwargs[name] = values
         else:
             raise AssertionError(f"unhandled field kind in {msgtype}.{name}")
