@@ -149,6 +149,28 @@ def fluid_ground_time_s(x_s: float, model, rate_in_bps: float, first_data_s: flo
     return float("nan")
 
 
+def baseline(args: argparse.Namespace) -> None:
+    """The MC's seeds calibrated complete (no link): the difference of the means is the link's mean effect."""
+    config = load_config("type1", overrides={"maneuver.duration_s": args.duration_s})
+    n = round(args.duration_s * config.sample_rate_hz)
+    commands = maneuver_torque_commands(config, n)
+    instrument = InstrumentModel.from_layout("type1")
+    z = []
+    started = time.monotonic()
+    for i in range(args.seeds):
+        out = simulate_batch(config, 5000 + i, commands)
+        stamps = np.rint(out.t_s * 1e9).astype(np.int64)
+        record = align_streams(stamps, out.st_quat_xyzw, {1: (stamps, out.voltages_v[:, 0]),
+                                                          2: (stamps, out.voltages_v[:, 1])}, instrument.sample_rate_hz)
+        z.append(_z(calibrate(record, instrument).to_dict(), out))
+    z = np.array(z)
+    print(f"baseline: the same {args.seeds} seeds, complete records (no link); {time.monotonic() - started:.0f} s")
+    names = [f"GRS{k} {p}" for k in (1, 2) for p in ("G_Pphi", "G_Ptheta", "G_Ppsi")]
+    names += [f"GRS{k} d_{a}" for k in (1, 2) for a in "xyz"]
+    for j, name in enumerate(names):
+        print(f"  {name:14s} mean err/sigma {z[:, j].mean():+.3f}  std err/sigma {z[:, j].std(ddof=1):.3f}")
+
+
 def graph(args: argparse.Namespace) -> None:
     out = Path(args.out or tempfile.mkdtemp(prefix="bench-link-"))
     bag = out / "ground_bag"
@@ -197,7 +219,7 @@ def graph(args: argparse.Namespace) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--studies", default="graph,mc")
+    parser.add_argument("--studies", default="graph,mc", help="graph, mc, baseline (comma-separated)")
     parser.add_argument("--seeds", type=int, default=50)
     parser.add_argument("--duration-s", type=float, default=10800.0, help="MC record length [s]")
     parser.add_argument("--graph-duration-s", type=float, default=86400.0)
@@ -211,6 +233,8 @@ def main() -> None:
     studies = args.studies.split(",")
     if "mc" in studies:
         mc(args)
+    if "baseline" in studies:
+        baseline(args)
     if "graph" in studies:
         graph(args)
 
