@@ -52,7 +52,7 @@ from .onset import onset_posterior
 from .partners import jointly_determined
 from .record import Record, RecordSettings, calibrate
 from .spectral import dft
-from .standing import FAMILY_VARIANTS_MAX, family_group, standing_verdict
+from .standing import FAMILY_VARIANTS_MAX, family_group, standing_verdict, subfamily_group
 
 __all__ = ["DiagnosisOptions", "DiagnosisResult", "EffectReport", "diagnose", "variant_sensitivities"]
 
@@ -769,32 +769,43 @@ def _families(full: Record, candidates: Sequence[Candidate], accepted: Sequence[
     it lacks gain more than ``(p - k) ln N`` in the final model; it is then named once, with its
     vector of magnitudes and their covariance (the fit with every variant of the family).
     """
-    groups: dict[str, list[Candidate]] = {}
-    for candidate in accepted:
-        if isinstance(candidate, Candidate) and not candidate.is_timing and candidate.variant:
-            groups.setdefault(family_group(candidate.name, candidate.variant), []).append(candidate)
     out = []
-    for group, members in groups.items():
-        if len(members) <= FAMILY_VARIANTS_MAX:
-            continue
-        family = [c for c in candidates if family_group(c.name, c.variant) == group]
-        missing = [c for c in family if c not in members]
-        extra = [name for c in missing for name in c.column_names()]
-        names = list(current) + extra
-        theta, cov, chi2_family = full.fit(names)
-        member_names = [name for c in family for name in c.column_names()]
-        index = [names.index(name) for name in member_names]
-        without = [name for name in current if name not in member_names]
-        gain = full.chi2(without) - chi2_family
-        p = len(member_names)
-        extra_gain = chi2_final - chi2_family
-        stands = not missing or extra_gain > len(extra) * log_n
-        out.append({"family": group, "variants": [c.key for c in family], "accepted_variants": [c.key for c in members],
-                    "magnitudes": theta[index].tolist(), "covariance": cov[np.ix_(index, index)].tolist(),
-                    "sigmas": np.sqrt(np.maximum(np.diag(cov)[index], 0.0)).tolist(), "n_params": p,
-                    "delta_chi2": float(gain), "score": float(gain - p * log_n),
-                    "delta_chi2_of_the_missing_variants": float(extra_gain), "stands": bool(stands)})
+    for grouping in (family_group, subfamily_group):  # the whole family, then its parts of one physics
+        groups: dict[str, list[Candidate]] = {}
+        for candidate in accepted:
+            if isinstance(candidate, Candidate) and not candidate.is_timing and candidate.variant:
+                groups.setdefault(grouping(candidate.name, candidate.variant), []).append(candidate)
+        standing = {f["family"] for f in out if f["stands"]}
+        for group, members in groups.items():
+            if len(members) <= FAMILY_VARIANTS_MAX or group in {f["family"] for f in out}:
+                continue
+            if grouping is subfamily_group and family_group(members[0].name, members[0].variant) in standing:
+                continue
+            out.append(_family_fit(full, candidates, grouping, group, members, current, chi2_final, log_n))
     return out
+
+
+def _family_fit(full: Record, candidates: Sequence[Candidate], grouping: Callable[[str, str], str], group: str,
+                members: Sequence[Candidate], current: Sequence[str], chi2_final: float, log_n: float
+                ) -> dict[str, Any]:
+    """One family as one candidate: its fit with every variant, and whether it stands (:func:`_families`)."""
+    family = [c for c in candidates if grouping(c.name, c.variant) == group]
+    missing = [c for c in family if c not in members]
+    extra = [name for c in missing for name in c.column_names()]
+    names = list(current) + extra
+    theta, cov, chi2_family = full.fit(names)
+    member_names = [name for c in family for name in c.column_names()]
+    index = [names.index(name) for name in member_names]
+    without = [name for name in current if name not in member_names]
+    gain = full.chi2(without) - chi2_family
+    p = len(member_names)
+    extra_gain = chi2_final - chi2_family
+    stands = not missing or extra_gain > len(extra) * log_n
+    return {"family": group, "variants": [c.key for c in family], "accepted_variants": [c.key for c in members],
+            "magnitudes": theta[index].tolist(), "covariance": cov[np.ix_(index, index)].tolist(),
+            "sigmas": np.sqrt(np.maximum(np.diag(cov)[index], 0.0)).tolist(), "n_params": p,
+            "delta_chi2": float(gain), "score": float(gain - p * log_n),
+            "delta_chi2_of_the_missing_variants": float(extra_gain), "stands": bool(stands)}
 
 
 def _apply_naming_rule(result: DiagnosisResult, reports: Sequence[EffectReport], remaining: Sequence[Location]

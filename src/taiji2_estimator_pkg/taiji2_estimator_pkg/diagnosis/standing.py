@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from typing import Any
 
 __all__ = ["FAMILY_VARIANTS_MAX", "HELDOUT_Z_MIN", "HELDOUT_Z_MIN_UNEXPLAINED", "SHRINK_MIN", "family_group",
-           "standing_verdict"]
+           "standing_verdict", "subfamily_group"]
 
 SHRINK_MIN = 0.5
 HELDOUT_Z_MIN = 1.0
@@ -41,6 +41,15 @@ def family_group(name: str, variant: str) -> str:
     """The physical family a variant belongs to: the effect on one GRS (``cross_coupling[grs1]``,
     ``com_drift[both]``, ``thruster_force_leakage[Fx]``) or the whole effect (``thruster_torque_gain``)."""
     return f"{name}[{variant.split('.')[0]}]" if "." in variant else name
+
+
+def subfamily_group(name: str, variant: str) -> str:
+    """A finer family where one effect has parts of different physics: the misalignment (three axes) and
+    the electrode imbalance (three pairs) of one GRS's cross-coupling; the family itself otherwise."""
+    if name == "cross_coupling" and "." in variant:
+        grs, part = variant.split(".", 1)
+        return f"{name}[{grs}.{part.split('_')[0]}]"
+    return family_group(name, variant)
 
 
 def _reason(report: Any, unexplained: bool) -> str | None:
@@ -87,7 +96,8 @@ def standing_verdict(reports: Sequence[Any], unexplained: bool, families: Sequen
             continue
         reason = _reason(report, unexplained)
         if (reason is None and stacked.get(report.name, 0) > FAMILY_VARIANTS_MAX
-                and family_group(report.name, report.variant) not in standing_families):
+                and family_group(report.name, report.variant) not in standing_families
+                and subfamily_group(report.name, report.variant) not in standing_families):
             reason = (f"one of {stacked[report.name]} variants of {report.name} accepted together: they imitate "
                       f"a gap that no single catalog effect explains (the family as one candidate does not beat "
                       f"them)")
