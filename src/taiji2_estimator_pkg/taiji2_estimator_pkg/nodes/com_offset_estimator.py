@@ -20,6 +20,7 @@ import numpy as np
 from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimate, ComOffsetEstimator, PaperComOffsetFilter
 from taiji2_estimator_pkg.core.parameters import com_offset_options, paper_com_offset_options
 from taiji2_estimator_pkg.nodes import common
+from taiji2_runtime.batched import create_batched_subscription
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages
 from taiji2_runtime.threads import limit_blas_threads
@@ -54,11 +55,13 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         t = messages.taiji2_msgs
         qos = common.raw_qos()
         for gid in GRS_IDS:
-            self.create_subscription(t.GrsVoltages, common.GRS_TOPICS[gid], lambda m, g=gid: self._on_grs(m, g), qos)
+            # raw streams: up to 16 queued messages per callback (rclpy takes one per wait-set pass otherwise)
+            create_batched_subscription(self, t.GrsVoltages, common.GRS_TOPICS[gid],
+                                        lambda m, g=gid: self._on_grs(m, g), qos)
             self.create_subscription(t.ScaleFactorEstimate, f"/taiji2/estimates/grs{gid}/scale_factors",
                                      self._on_scale_factors, common.estimate_subscription_qos())
         if self.paper:
-            self.create_subscription(t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
+            create_batched_subscription(self, t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
         if self.use_rate:
             self.create_subscription(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, self._on_rate, qos)
         self.pubs = {g: self.create_publisher(t.ComOffsetEstimate, f"/taiji2/estimates/grs{g}/com_offset",

@@ -19,6 +19,7 @@ import numpy as np
 from taiji2_estimator_pkg.core.parameters import paper_scale_factor_options, scale_factor_options
 from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorFilter, ScaleFactorEstimator
 from taiji2_estimator_pkg.nodes import common
+from taiji2_runtime.batched import create_batched_subscription
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages
 from taiji2_runtime.threads import limit_blas_threads
@@ -45,9 +46,11 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
 
         t = messages.taiji2_msgs
         qos = common.raw_qos()
-        self.create_subscription(t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
+        # raw streams: up to 16 queued messages per callback (rclpy takes one per wait-set pass otherwise)
+        create_batched_subscription(self, t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
         for gid in GRS_IDS:
-            self.create_subscription(t.GrsVoltages, common.GRS_TOPICS[gid], lambda m, g=gid: self._on_grs(m, g), qos)
+            create_batched_subscription(self, t.GrsVoltages, common.GRS_TOPICS[gid],
+                                        lambda m, g=gid: self._on_grs(m, g), qos)
         self.estimate_pubs = {g: self.create_publisher(t.ScaleFactorEstimate,
                                                        f"/taiji2/estimates/grs{g}/scale_factors",
                                                        common.estimate_qos())
