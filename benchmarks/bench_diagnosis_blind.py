@@ -57,7 +57,7 @@ try:
 except ImportError:  # editable install made before the package had modules
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src" / "taiji2_estimator_pkg"))
     from taiji2_estimator_pkg.diagnosis import FAMILIES, DiagnosisOptions, candidate_catalog, diagnose, prepare_input
-from taiji2_estimator_pkg.campaign.engine import connect  # noqa: E402
+from taiji2_estimator_pkg.campaign.engine import open_cluster  # noqa: E402
 from taiji2_estimator_pkg.diagnosis.candidates import ONSET_KINDS, TIMING_FAMILIES  # noqa: E402
 from taiji2_estimator_pkg.diagnosis.engine import variant_sensitivities  # noqa: E402
 from taiji2_estimator_pkg.diagnosis.model import NominalModel  # noqa: E402
@@ -585,8 +585,7 @@ def main() -> int:
         entry["index"], entry["seed"] = index, args.seed * 1000 + index
     results: list[dict] = []
     failures: list[str] = []
-    client, cluster = connect(args.scheduler or None, workers)  # Dask: the campaign engine's cluster
-    try:
+    with open_cluster(args.scheduler or None, workers) as client:  # Dask: the campaign engine's cluster
         futures = [client.submit(run_one, (entry, args.layout, args.duration_s), pure=False) for entry in plan]
         for future in as_completed(futures):
             try:
@@ -609,10 +608,6 @@ def main() -> int:
             print(f"[{len(results):3d}/{len(plan)}] {result['fidelity'][:3]} {result['kind']:14s} drawn: {drawn:60s} "
                   f"-> {got}{' UNEXPLAINED' if result['verdict']['unexplained'] else ''} ({result['seconds']:.1f} s)",
                   file=sys.stderr, flush=True)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
     results.sort(key=lambda r: r["index"])
     tables = {"all": score(results, sigmas["time_offset"])}
     for fidelity in ("standard", "reference"):
