@@ -186,7 +186,7 @@ def _timing_convention(rng: np.random.Generator) -> dict[str, float]:
 
 def make_plan(count: int, seed: int, sigmas: dict[str, float], model: NominalModel, kmin: float, kmax: float,
               clean: int | None = None, fidelity: str = "standard", onset_fraction: float = 0.0,
-              duration_s: float = 10800.0) -> list[dict]:
+              duration_s: float = 10800.0, out_of_catalog: int | None = None, pairs: int | None = None) -> list[dict]:
     """The hidden draw of every data set (``clean``: number of clean sets, default 20 %)."""
     rng = np.random.default_rng(seed)
     candidates, noise = candidate_catalog()
@@ -196,8 +196,8 @@ def make_plan(count: int, seed: int, sigmas: dict[str, float], model: NominalMod
     families = list(FAMILIES if fidelity == "standard" else PHYSICAL)
     n_clean = max(4, round(0.2 * count)) if clean is None else clean
     rest = count - n_clean
-    n_out = max(3, round(0.15 * count)) if rest > 0 else 0
-    n_two = max(3, round(0.15 * count)) if rest > 0 else 0
+    n_out = (max(3, round(0.15 * count)) if rest > 0 else 0) if out_of_catalog is None else out_of_catalog
+    n_two = (max(3, round(0.15 * count)) if rest > 0 else 0) if pairs is None else pairs
     n_one = max(0, rest - n_out - n_two)
     plan = []
     for _ in range(n_clean):
@@ -554,6 +554,10 @@ def main() -> int:
     parser.add_argument("--reference-fraction", type=float, default=0.5,
                         help="fraction of the sets drawn at reference fidelity (default 0.5)")
     parser.add_argument("--json", default="", help="write the per-set results and the table here")
+    parser.add_argument("--out-of-catalog", type=int, default=None,
+                        help="out-of-catalog sets per fidelity (default 15 %%, at least 3)")
+    parser.add_argument("--pairs", type=int, default=None,
+                        help="two-effect sets per fidelity (default 15 %%, at least 3)")
     parser.add_argument("--transients", type=int, default=0,
                         help="transient sets (a torque pulse) per fidelity, added to --sets (default 0)")
     parser.add_argument("--onset-fraction", type=float, default=0.0,
@@ -574,10 +578,11 @@ def main() -> int:
     clean = None if args.clean is None else (args.clean - args.clean // 2, args.clean // 2)
     plan = make_plan(args.sets - n_reference, args.seed, sigmas, model, args.kmin, args.kmax,
                      None if clean is None else clean[0], "standard", args.onset_fraction,
-                     args.duration_s) if args.sets - n_reference else []
+                     args.duration_s, args.out_of_catalog, args.pairs) if args.sets - n_reference else []
     if n_reference:
         plan += make_plan(n_reference, args.seed + 7919, sigmas, model, args.kmin, args.kmax,
-                          None if clean is None else clean[1], "reference", args.onset_fraction, args.duration_s)
+                          None if clean is None else clean[1], "reference", args.onset_fraction, args.duration_s,
+                          args.out_of_catalog, args.pairs)
     if args.transients:
         plan += transient_plan(args.transients, args.seed, model, args.duration_s, "standard")
         plan += transient_plan(args.transients, args.seed + 1, model, args.duration_s, "reference")
@@ -595,6 +600,8 @@ def main() -> int:
                 print(f"set failed: {failures[-1]}", file=sys.stderr, flush=True)
                 continue
             results.append(result)
+            if args.json:  # as it goes: a cut-short run keeps what it has
+                Path(args.json + ".partial").write_text(json.dumps({"results": results}, default=str))
             drawn = ", ".join(f"{d['variant']} ({d['k']:.1f} sigma" + (f", from {d['onset_s']:.0f} s" if "onset_s" in d
                                                                      else "") + ")" for d in result["drawn"]) or (
                 result["private"]["name"] if result["private"] else "none")
