@@ -118,12 +118,13 @@ def test_ros2_bag_record_is_calibrated_and_the_recorders_bag_is_played_by_ros2_b
         recorder = ros(f"exec python3 -m taiji2_runtime.cli.main bag record -o {again} {topics}",
                        env={"TAIJI2_RUNTIME": "cyclonedds"}, background=True)
         try:
-            wait = ros(f"for i in $(seq 60); do [ $(ros2 topic info {RAW_TOPICS[0]} | grep -c 'Subscription count: 1') "
-                       "= 1 ] && break; sleep 0.5; done", timeout=120)
-            play = ros(f"ros2 bag play {theirs} --rate 200 --qos-profile-overrides-path {QOS_OVERRIDES}", timeout=180)
+            # the recorder subscribes once it sees a publisher (to learn its QoS): the player waits 5 s (--delay)
+            # after creating its publishers, and at the end until the recorder acknowledged everything
+            play = ros(f"ros2 bag play {theirs} --rate 200 --qos-profile-overrides-path {QOS_OVERRIDES} "
+                       "--delay 5 --wait-for-all-acked 30000 --disable-keyboard-controls", timeout=180)
         finally:
             status, err = _stop(recorder)
-        assert wait.returncode == 0 and play.returncode == 0 and status == 0, (play.stderr[-2000:], err[-2000:])
+        assert play.returncode == 0 and status == 0, (play.stderr[-2000:], err[-2000:])
         replayed = load_raw_bag(again)
         for name in ("star_tracker", "grs1", "grs2"):
             assert getattr(replayed, name).stamp_ns.size == SAMPLES, (name, getattr(replayed, name).stamp_ns.size)
