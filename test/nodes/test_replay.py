@@ -26,7 +26,9 @@ def test_bag_replayed_into_the_estimators_reproduces_the_live_estimates(tmp_path
     bag, out = tmp_path / "live", tmp_path / "out"
     live = _taiji2("experiment", "--duration-s", DURATION_S, "--seed", 5, "--record", bag, "--out", out, "--json")
     stdout, stderr = live.communicate(timeout=600)
-    assert live.returncode == 0, stderr
+    # 0: every requirement met; 3: the run completed and some requirement is not met in 600 s (the
+    # verdict says which): both are a complete run, which is all this test needs
+    assert live.returncode in (0, 3), stderr
     live_result = json.loads(stdout.strip().splitlines()[-1])
 
     ctx = rclpy.context.Context()
