@@ -16,7 +16,7 @@ import time
 from taiji2_runtime.interfaces import to_plain
 from taiji2_runtime.ros import messages, rclpy
 
-TYPES = ("GrsVoltages", "StarTracker", "ScaleFactorEstimate", "ComOffsetEstimate")
+TYPES = ("GrsVoltages", "StarTracker", "ScaleFactorEstimate", "ComOffsetEstimate", "SpacePackets")
 TIMEOUT_S = 60.0
 
 
@@ -31,9 +31,15 @@ def _filled(name: str) -> object:
     elif name == "StarTracker":
         msg.attitude.x, msg.attitude.y, msg.attitude.z, msg.attitude.w = 0.1, -0.2, 0.3, 0.927
         msg.attitude_covariance = [1e-10 * (k + 1) for k in range(9)]
+    elif name == "SpacePackets":
+        msg.data = [0, 255, 7, 129, 64, 3]
+        msg.times_ns = [-(2**63), 0, 2**63 - 1]
+        msg.transmitted_through_ns = -1
+        msg.end_of_data = True
     else:
         msg.grs_id = 2
         msg.method = "gls"
+        msg.samples_missing, msg.latency_s = 123, float("inf")
         msg.covariance = [-(k + 0.5) for k in range(9)]
         msg.samples_used, msg.samples_rejected = 4_294_967_295, 7
         msg.nis, msg.nis_mean = 2.5, 0.99

@@ -92,7 +92,7 @@ def test_embedded_endpoints_carry_rosidls_type_hash(ros):
     from taiji2_runtime.interfaces import type_hash_of
 
     # our message types: the hash rosidl generates in a colcon build of this workspace
-    for name in ("GrsVoltages", "StarTracker", "ScaleFactorEstimate", "ComOffsetEstimate"):
+    for name in ("GrsVoltages", "StarTracker", "ScaleFactorEstimate", "ComOffsetEstimate", "SpacePackets"):
         out = ros(f"cat $(ros2 pkg prefix taiji2_msgs)/share/taiji2_msgs/msg/{name}.json")
         assert out.returncode == 0, out.stderr
         generated = json.loads(out.stdout)["type_hashes"][0]
@@ -220,7 +220,7 @@ def test_every_taiji2_message_type_crosses_between_rclpy_and_embedded_both_ways(
             status, err = _stop(echo)
         lines = [json.loads(line) for line in drive.stdout.splitlines() if line.startswith("{")]
         assert [line["type"] for line in lines] == ["GrsVoltages", "StarTracker", "ScaleFactorEstimate",
-                                                    "ComOffsetEstimate"], drive.stderr
+                                                    "ComOffsetEstimate", "SpacePackets"], drive.stderr
         for line in lines:
             assert line["received"] == line["sent"], (echo_env, line)
         assert drive.returncode == 0 and status == 0, (drive.stderr, err)
