@@ -110,7 +110,7 @@ def test_cli_short_and_bad_inputs(tmp_path, capsys):
     _write_npz(tmp_path / "short.npz", 2000, 52)
     assert verb.main(_args(tmp_path / "short.npz", tmp_path / "o1")) == 3
     assert "insufficient data" in capsys.readouterr().out
-    with pytest.raises(ValueError, match="no such file"):
+    with pytest.raises(ValueError, match="no such bag"):
         verb.main(_args(tmp_path / "missing", tmp_path / "o2"))
     np.savez(tmp_path / "bad.npz", t_s=np.arange(10.0))
     with pytest.raises(ValueError, match="missing arrays st_quat_xyzw"):
