@@ -26,14 +26,13 @@ from spacepackets.ecss.pus_1_verification import (
     VerificationParams,
 )
 from spacepackets.ecss.req_id import RequestId
-from spacepackets.ecss.tc import InvalidTcCrc16Error, PusTc
+from spacepackets.ecss.tc import PusTc
 from spacepackets.ecss.tm import ManagedParams
-from spacepackets.exceptions import BytesTooShortError
 
 from .cuc import CucError, cuc_pack, cuc_unpack_ns
 from .definition import TC_APID
 from .packetize import SEQ_MODULO, PacketError
-from .telecommand import TC_PACKET_OCTETS, TorqueCommand, decode_torque_tc, encode_torque_tc
+from .telecommand import TC_PACKET_OCTETS, TorqueCommand, decode_torque_tc, encode_torque_tc, unpack_telecommand
 
 __all__ = ["FAILURE_CAPACITY", "FAILURE_LATE", "MAX_ACTIVITIES_PER_TC", "REPORT_APID", "Activity",
            "VerificationReport", "decode_insert_activities", "decode_report", "encode_insert_activities",
@@ -82,15 +81,7 @@ def decode_insert_activities(packet: bytes) -> tuple[PusTc, list[TorqueCommand]]
         ``crc_error``, ``truncated``, ``unknown_apid`` (not TC[11,4] of APID 0x140), ``wrong_length``,
         ``bad_time_field``.
     """
-    try:
-        tc = PusTc.unpack(bytes(packet))
-    except InvalidTcCrc16Error as exc:
-        raise PacketError("crc_error", f"telecommand: {exc}") from None
-    except BytesTooShortError as exc:
-        raise PacketError("truncated", f"telecommand: {exc}") from None
-    if tc.apid != TC_APID or tc.service != SCHEDULING_SERVICE or tc.message_subtype != INSERT_ACTIVITIES:
-        raise PacketError("unknown_apid", f"telecommand APID 0x{tc.apid:03X} service {tc.service},{tc.message_subtype}"
-                                          " is not TC[11,4]")
+    tc = unpack_telecommand(packet, SCHEDULING_SERVICE, INSERT_ACTIVITIES, " is not TC[11,4]")
     data = tc.app_data
     n = struct.unpack(">H", data[:2])[0] if len(data) >= 2 else -1
     if n < 1 or len(data) != 2 + n * _INSTRUCTION_OCTETS:

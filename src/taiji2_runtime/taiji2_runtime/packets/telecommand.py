@@ -46,6 +46,27 @@ def encode_torque_tc(seq_count: int, execute_onboard_ns: int, torque_n_m: np.nda
     return bytes(tc.pack())
 
 
+def unpack_telecommand(packet: bytes, service: int, subtype: int, expected: str) -> PusTc:
+    """The PUS TC of APID ``TC_APID`` and service (``service``, ``subtype``) in ``packet`` (CRC checked by
+    spacepackets); ``expected`` names it in the error (e.g. ``" is not TC[11,4]"``).
+
+    Raises
+    ------
+    PacketError
+        ``crc_error``, ``truncated`` or ``unknown_apid`` (another APID or service).
+    """
+    try:
+        tc = PusTc.unpack(bytes(packet))
+    except InvalidTcCrc16Error as exc:
+        raise PacketError("crc_error", f"telecommand: {exc}") from None
+    except BytesTooShortError as exc:
+        raise PacketError("truncated", f"telecommand: {exc}") from None
+    if tc.apid != TC_APID or tc.service != service or tc.message_subtype != subtype:
+        raise PacketError("unknown_apid", f"telecommand APID 0x{tc.apid:03X} service {tc.service},{tc.message_subtype}"
+                                          f"{expected}")
+    return tc
+
+
 def decode_torque_tc(packet: bytes) -> TorqueCommand:
     """Decode one torque TC (CRC checked by spacepackets).
 
@@ -54,14 +75,7 @@ def decode_torque_tc(packet: bytes) -> TorqueCommand:
     PacketError
         ``crc_error``, ``truncated``, ``unknown_apid`` (another TC) or ``bad_time_field``.
     """
-    try:
-        tc = PusTc.unpack(bytes(packet))
-    except InvalidTcCrc16Error as exc:
-        raise PacketError("crc_error", f"telecommand: {exc}") from None
-    except BytesTooShortError as exc:
-        raise PacketError("truncated", f"telecommand: {exc}") from None
-    if tc.apid != TC_APID or tc.service != TC_SERVICE or tc.message_subtype != TC_SUBTYPE_TORQUE:
-        raise PacketError("unknown_apid", f"telecommand APID 0x{tc.apid:03X} service {tc.service},{tc.message_subtype}")
+    tc = unpack_telecommand(packet, TC_SERVICE, TC_SUBTYPE_TORQUE, "")
     data = tc.app_data
     if len(data) != TC_APP_DATA_OCTETS:
         raise PacketError("wrong_length", f"torque telecommand with {len(data)} octets of application data")
