@@ -161,6 +161,7 @@ class Context:
             # Deleting the participant (and with it every reader/writer) sends the SPDP dispose,
             # so peers drop us at once instead of after the lease duration.
             participant.__del__()
+            forget_deleted_entities()
 
     # -- DDS entities --------------------------------------------------------------------------
     @property
@@ -279,3 +280,21 @@ _default_context = Context()
 def get_default_context() -> Context:
     """The process-wide default context (rclpy.utilities.get_default_context)."""
     return _default_context
+
+
+def forget_deleted_entities() -> None:
+    """Drop from cyclonedds' registry the Python entities whose DDS entity is gone (deleted with their
+    participant: readers, writers, read conditions, topics).
+
+    cyclonedds-python's ``Entity.__del__`` deletes the handle it holds if that handle is still in its
+    registry. Cyclone DDS reuses handle values, so a stale reader object finalized later (by the
+    garbage collector, at any allocation) could delete a *new* entity that got its old handle: a
+    topic created a moment later then crashed the process (a segmentation fault in ``Topic()`` once
+    in the suite). Forgotten, their finalizers do nothing.
+    """
+    from cyclonedds.core import Entity
+
+    registry = Entity._entities
+    for ref, entity in list(registry.items()):
+        if entity is not None and entity._get_parent(ref) < 0:  # a negative return code: no such entity (deleted)
+            registry.pop(ref, None)

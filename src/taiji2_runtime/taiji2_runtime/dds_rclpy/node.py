@@ -13,7 +13,7 @@ from taiji2_runtime.interfaces import message_class, ros_type_name, type_hash
 from .arguments import node_matches, parse_ros_args
 from .clock import Clock, ROSClock
 from .clock_type import ClockType
-from .context import Context, get_default_context
+from .context import Context, forget_deleted_entities, get_default_context
 from .exceptions import NotInitializedException
 from .logging import RcutilsLogger, get_logger
 from .names import expand_topic_name, normalize_namespace, remap_topic_name, validate_node_name
@@ -236,6 +236,7 @@ class Node(ParameterMixin):
         if subscription in self._subscriptions:
             self._subscriptions.remove(subscription)
             subscription.destroy()
+            forget_deleted_entities()  # its read condition went with the reader
             self._context.entities_changed()
             return True
         return False
@@ -272,6 +273,8 @@ class Node(ParameterMixin):
         for timer in self._timers:
             timer.destroy()
         self._publishers, self._subscriptions, self._timers, self._services = [], [], [], []
+        if alive:
+            forget_deleted_entities()  # read conditions went with their readers
         self._context.unregister_node(self)
 
     # -- graph ---------------------------------------------------------------------------------
