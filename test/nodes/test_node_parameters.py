@@ -136,3 +136,28 @@ def test_config_files_say_which_parameters_can_change_at_run_time():
         documented = {key for key in runtime if f" {key}:" in text}
         assert marked == documented, (marked, documented)
         yaml.safe_load(text)
+
+
+def test_link_nodes_parameters_are_read_only():
+    # the link's and the commanding chain's parameters are read once at start: `ros2 param set` is refused,
+    # not answered "successful" for a change that would do nothing
+    from taiji2_sim_pkg.nodes.command_planner import CommandPlanner
+    from taiji2_sim_pkg.nodes.ground_receiver import GroundReceiver
+    from taiji2_sim_pkg.nodes.onboard_executor import OnboardExecutor
+    from taiji2_sim_pkg.nodes.space_link import SpaceLink
+    from taiji2_sim_pkg.nodes.telemetry_packetizer import TelemetryPacketizer
+
+    for node_class in (CommandPlanner, GroundReceiver, OnboardExecutor, SpaceLink, TelemetryPacketizer):
+        context = rclpy.context.Context()
+        rclpy.init(context=context)
+        node = node_class(context=context)
+        try:
+            names = [n for n in node._parameters if n != "use_sim_time"]
+            assert names, node_class
+            for name in names:
+                assert node.describe_parameter(name).read_only, (node_class, name)
+                result = _set(node, name, node.get_parameter(name).value)
+                assert not result.successful and result.reason == READ_ONLY.format(name), (node_class, name)
+        finally:
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)

@@ -31,6 +31,11 @@ def descriptor(description: str, *, read_only: bool = False) -> Any:
     return rcl.ParameterDescriptor(description=text, read_only=read_only)
 
 
+def read_only(description: str) -> Any:
+    """The descriptor of a parameter read once at start (``ros2 param set`` refused)."""
+    return descriptor(description, read_only=True)
+
+
 def positive(name: str, unit: str) -> Check:
     """A check that ``name`` is a finite number > 0 [``unit``]."""
     def check(value: Any) -> str | None:

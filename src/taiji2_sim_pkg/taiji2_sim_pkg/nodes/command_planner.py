@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from taiji2_runtime.entry import run_node
+from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.scheduling import MAX_ACTIVITIES_PER_TC, Activity, encode_insert_activities
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.config import load_config
@@ -33,9 +34,6 @@ _NS = 1_000_000_000
 PLAN_TOPIC = "/ground/commanding/plan"
 
 
-def _descriptor(description: str) -> Any:
-    return messages.rcl_interfaces.ParameterDescriptor(description=description)
-
 
 class CommandPlanner(rclpy.node.Node):
     """The ground's command planner (module docstring)."""
@@ -43,12 +41,12 @@ class CommandPlanner(rclpy.node.Node):
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("command_planner", **node_kwargs)
         dp = self.declare_parameter
-        preset = dp("preset", "type1", _descriptor("layout whose square wave is flown (type1 | type2)")).value
-        maneuver_file = dp("maneuver_file", "", _descriptor("maneuver file instead of the preset")).value
-        start_s = dp("start_s", -1.0, _descriptor("maneuver start [s] (-1: the preset's or the file's)")).value
-        duration_s = dp("duration_s", -1.0, _descriptor("maneuver duration [s] (-1: the preset's or file's)")).value
-        dt_s = 1.0 / dp("command_rate_hz", 10.0, _descriptor("command grid rate [Hz]")).value
-        self.model = load_link_model(dp("link_model", "ideal", _descriptor(
+        preset = dp("preset", "type1", read_only("layout whose square wave is flown (type1 | type2)")).value
+        maneuver_file = dp("maneuver_file", "", read_only("maneuver file instead of the preset")).value
+        start_s = dp("start_s", -1.0, read_only("maneuver start [s] (-1: the preset's or the file's)")).value
+        duration_s = dp("duration_s", -1.0, read_only("maneuver duration [s] (-1: the preset's or file's)")).value
+        dt_s = 1.0 / dp("command_rate_hz", 10.0, read_only("command grid rate [Hz]")).value
+        self.model = load_link_model(dp("link_model", "ideal", read_only(
             "the link model whose passes, light time and onboard schedule the plan follows")).value)
         if maneuver_file:
             maneuver = load_maneuver_file(maneuver_file)

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from taiji2_runtime.entry import run_node
+from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.packetize import PacketError
 from taiji2_runtime.packets.reception import GroundReception, ReleasedSample
 from taiji2_runtime.packets.scheduling import REPORT_APID, decode_report
@@ -35,18 +36,15 @@ _NS = 1_000_000_000
 _FRAMES = {"grs1": "tmrf1", "grs2": "tmrf2"}
 
 
-def _descriptor(description: str) -> Any:
-    return messages.rcl_interfaces.ParameterDescriptor(description=description)
-
 
 class GroundReceiver(rclpy.node.Node):
     """Depacketizes the received telemetry in order (module docstring)."""
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("ground_receiver", **node_kwargs)
-        offset_s = self.declare_parameter("time_correlation_offset_s", 0.0, _descriptor(
+        offset_s = self.declare_parameter("time_correlation_offset_s", 0.0, read_only(
             "contract time of the onboard clock's zero [s] (contract = offset + rate x onboard)")).value
-        rate = self.declare_parameter("time_correlation_rate", 1.0, _descriptor("onboard clock rate")).value
+        rate = self.declare_parameter("time_correlation_rate", 1.0, read_only("onboard clock rate")).value
         self._correlation = TimeCorrelation(float(offset_s), float(rate))
         self._rx = GroundReception()
         qos = lt.reliable_all()

@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from taiji2_runtime.entry import run_node
+from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.packetize import PacketError
 from taiji2_runtime.packets.scheduling import FAILURE_CAPACITY, FAILURE_LATE, decode_insert_activities, encode_report
 from taiji2_runtime.ros import messages, rclpy
@@ -30,9 +31,6 @@ _NS = 1_000_000_000
 REPORTS_TOPIC = "/onboard/link/tm_reports"
 
 
-def _descriptor(description: str) -> Any:
-    return messages.rcl_interfaces.ParameterDescriptor(description=description)
-
 
 class OnboardExecutor(rclpy.node.Node):
     """The onboard command executor (module docstring)."""
@@ -40,11 +38,11 @@ class OnboardExecutor(rclpy.node.Node):
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("onboard_executor", **node_kwargs)
         dp = self.declare_parameter
-        capacity = dp("schedule_capacity", 3000, _descriptor("activities the onboard schedule holds")).value
-        margin = dp("time_margin_s", 60.0, _descriptor(
+        capacity = dp("schedule_capacity", 3000, read_only("activities the onboard schedule holds")).value
+        margin = dp("time_margin_s", 60.0, read_only(
             "an activity due within this time of its arrival is refused [s]")).value
-        rate_hz = dp("publish_rate_hz", 10.0, _descriptor("command rate on the onboard bus [Hz]")).value
-        self._lookahead_ns = round(_NS * dp("lookahead_s", 2.0, _descriptor(
+        rate_hz = dp("publish_rate_hz", 10.0, read_only("command rate on the onboard bus [Hz]")).value
+        self._lookahead_ns = round(_NS * dp("lookahead_s", 2.0, read_only(
             "publish time-tagged commands this far ahead of the clock [s]")).value)
         self._period_ns = round(_NS / rate_hz)
         self.schedule = OnboardSchedule(capacity, margin)

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from taiji2_runtime.entry import run_node
+from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.definition import STREAM_BY_APID, TC_APID
 from taiji2_runtime.packets.scheduling import REPORT_APID
 from taiji2_runtime.ros import messages, rclpy
@@ -34,9 +35,6 @@ _NS = 1_000_000_000
 #: packets per published burst at most
 MAX_BURST_PACKETS = 4096
 
-
-def _descriptor(description: str) -> Any:
-    return messages.rcl_interfaces.ParameterDescriptor(description=description)
 
 
 def _apid_name(apid: int) -> str:
@@ -50,12 +48,12 @@ class SpaceLink(rclpy.node.Node):
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("space_link", **node_kwargs)
-        model_name = self.declare_parameter("model", "ideal", _descriptor(
+        model_name = self.declare_parameter("model", "ideal", read_only(
             "link model: a preset of config/link.yaml (ideal, deep_space) or a YAML file")).value
-        seed = self.declare_parameter("seed", 0, _descriptor("seed of the loss and duplicate draws")).value
-        missed = self.declare_parameter("missed_contacts", [-1], _descriptor(
+        seed = self.declare_parameter("seed", 0, read_only("seed of the loss and duplicate draws")).value
+        missed = self.declare_parameter("missed_contacts", [-1], read_only(
             "more faults: passes missed entirely (0 = the first; -1: none)")).value
-        lost_up = self.declare_parameter("lost_uplinks", [-1], _descriptor(
+        lost_up = self.declare_parameter("lost_uplinks", [-1], read_only(
             "more faults: passes whose uplink is lost (-1: none)")).value
         self.model = load_link_model(model_name).with_faults([k for k in missed if k >= 0],
                                                              [k for k in lost_up if k >= 0])

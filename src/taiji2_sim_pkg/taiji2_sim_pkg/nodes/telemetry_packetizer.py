@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from taiji2_runtime.entry import run_node
+from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.definition import STREAMS
 from taiji2_runtime.packets.packetize import encode_packet
 from taiji2_runtime.ros import messages, rclpy
@@ -26,9 +27,6 @@ from taiji2_sim_pkg.nodes import link_topics as lt
 _NS = 1_000_000_000
 
 
-def _descriptor(description: str) -> Any:
-    return messages.rcl_interfaces.ParameterDescriptor(description=description)
-
 
 class TelemetryPacketizer(rclpy.node.Node):
     """Packetizes the onboard raw streams (module docstring)."""
@@ -36,14 +34,14 @@ class TelemetryPacketizer(rclpy.node.Node):
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("telemetry_packetizer", **node_kwargs)
         self._burst_ns = round(_NS * self.declare_parameter(
-            "burst_period_s", 1.0, _descriptor("onboard time per published burst [s]")).value)
-        end_s = self.declare_parameter("end_of_data_s", -1.0, _descriptor(
+            "burst_period_s", 1.0, read_only("onboard time per published burst [s]")).value)
+        end_s = self.declare_parameter("end_of_data_s", -1.0, read_only(
             "the run's last sample time [s]: at it the telemetry ends (end_of_data); -1: never")).value
         self._end_ns = round(end_s * _NS) if end_s >= 0 else None
-        self._command_margin_ns = round(_NS * self.declare_parameter("command_end_margin_s", 0.1, _descriptor(
+        self._command_margin_ns = round(_NS * self.declare_parameter("command_end_margin_s", 0.1, read_only(
             "at the end, the executed-command stream need only have reached end_of_data_s minus this [s] (a "
             "command stamped at or after end_of_data_s acts after the run: not telemetry of it)")).value)
-        reports = self.declare_parameter("command_reports", False, _descriptor(
+        reports = self.declare_parameter("command_reports", False, read_only(
             "also take the onboard executor's report packets (/onboard/link/tm_reports) into the telemetry")).value
         t = messages.taiji2_msgs
         qos = lt.reliable_all()
