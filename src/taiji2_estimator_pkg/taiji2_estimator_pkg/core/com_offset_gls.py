@@ -110,6 +110,7 @@ class ComOffsetEstimator:
         self.t_last_s = float("nan")
         self.last_index: int | None = None
         self.determined = False
+        self._combination_cache: tuple | None = None
 
     # solution for given scale factors --------------------------------------------------------
     def corrected_information(self) -> np.ndarray:
@@ -120,18 +121,29 @@ class ComOffsetEstimator:
         info[:n, :n] -= self.eiv_sum
         return info
 
-    def _beta_system(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Information and vector on (beta, x0) for scale factors g, with the EIV correction."""
+    def _engine_combination(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(a_xx, a_yy): the column combination for scale factors g on the engine's parameters (the
+        columns and the SRP initial state x0). Kept for the last (model, g): the per-epoch gate asks for
+        the same G every epoch while the estimate of G stands still. Callers must not modify them."""
         model = self.model
+        key = (id(model), g.tobytes())
+        if self._combination_cache is not None and self._combination_cache[0] == key:
+            return self._combination_cache[1]
         q = self.filter.q_total
-        info_all = self.corrected_information()
-        a_y, a_x = model.combination(np.asarray(g, dtype=np.float64))
+        a_y, a_x = model.combination(g)
         # append the SRP initial-state columns (x0) of the engine
         a_xx = np.zeros((q, model.n_beta + 3))
         a_xx[:model.n_columns, :model.n_beta] = a_x
         a_xx[model.n_columns:, model.n_beta:] = np.eye(3)
         a_yy = np.zeros(q)
         a_yy[:model.n_columns] = a_y
+        self._combination_cache = (key, (a_xx, a_yy), model)  # the model is held so its id stays unique
+        return a_xx, a_yy
+
+    def _beta_system(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Information and vector on (beta, x0) for scale factors g, with the EIV correction."""
+        info_all = self.corrected_information()
+        a_xx, a_yy = self._engine_combination(np.asarray(g, dtype=np.float64))
         info = a_xx.T @ info_all @ a_xx
         vec = a_xx.T @ info_all @ a_yy
         return 0.5 * (info + info.T), vec, a_xx, a_yy
@@ -330,7 +342,7 @@ class ComOffsetEstimator:
                 beta, cov, ok = self.solve(g)
                 if ok:
                     theta = self._engine_theta(g, beta)
-                    _, _, a_xx, _ = self._beta_system(g)
+                    a_xx, _ = self._engine_combination(np.asarray(g, dtype=np.float64))
                     estimate = (theta, a_xx @ cov @ a_xx.T)
         sel, r_step, eiv = self._epoch_noise(present)
         info = self.filter.step(np.zeros(model.m), basis, rows=sel, r=r_step,
