@@ -28,6 +28,7 @@ from typing import Any
 import cyclonedds.idl.types as idl_types
 from cyclonedds.idl import IdlStruct
 
+from taiji2_runtime import fast_cdr
 from taiji2_runtime.typestore import (  # noqa: F401  (re-exported: the rosbags side, without Cyclone DDS)
     WORKSPACE_INTERFACE_PACKAGES,
     split_type,
@@ -171,6 +172,11 @@ def message_class(msgtype: str) -> type:
             setattr(cls, const_name, value)
         cls._ros_type = full
         cls._ros_field_types = field_types
+        # plain messages (de)serialise with struct, not Cyclone DDS's interpreted machine (fast_cdr.py)
+        codec = fast_cdr.compile_codec(cls, list(fields), message_class,
+                                       lambda t: store.fielddefs["/".join(split_type(t))][1])
+        if codec is not None:
+            fast_cdr.install(cls, codec)
         cls.get_fields_and_field_types = classmethod(_get_fields_and_field_types)
         cls.__repr__ = _repr
         return cls
