@@ -163,12 +163,25 @@ def baseline(args: argparse.Namespace) -> None:
         record = align_streams(stamps, out.st_quat_xyzw, {1: (stamps, out.voltages_v[:, 0]),
                                                           2: (stamps, out.voltages_v[:, 1])}, instrument.sample_rate_hz)
         z.append(_z(calibrate(record, instrument).to_dict(), out))
+        if i % 10 == 9:
+            print(f"  {i + 1} seeds ({time.monotonic() - started:.0f} s)", file=sys.stderr)
     z = np.array(z)
     print(f"baseline: the same {args.seeds} seeds, complete records (no link); {time.monotonic() - started:.0f} s")
     names = [f"GRS{k} {p}" for k in (1, 2) for p in ("G_Pphi", "G_Ptheta", "G_Ppsi")]
     names += [f"GRS{k} d_{a}" for k in (1, 2) for a in "xyz"]
+    # a mean of n independent err/sigma has the standard error std / sqrt(n) (1 / sqrt(n) if honest):
+    # a mean more than ~3 of them from 0 is a bias of the calibration, not the seeds'
     for j, name in enumerate(names):
-        print(f"  {name:14s} mean err/sigma {z[:, j].mean():+.3f}  std err/sigma {z[:, j].std(ddof=1):.3f}")
+        mean, std = z[:, j].mean(), z[:, j].std(ddof=1)
+        se = std / np.sqrt(len(z))
+        print(f"  {name:14s} mean err/sigma {mean:+.3f} +- {se:.3f} (s.e., {mean / se:+.1f} s.e.)  "
+              f"std err/sigma {std:.3f}")
+    c = np.corrcoef(z[:, :6].T)
+    print("  correlation of the G errors across seeds (GRS1 G_Pphi, G_Ptheta, G_Ppsi, GRS2 ...):")
+    print("  " + np.array2string(c, precision=2).replace("\n", "\n  "))
+    if args.out:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        np.save(Path(args.out) / "baseline_err_over_sigma.npy", z)
 
 
 def graph(args: argparse.Namespace) -> None:
