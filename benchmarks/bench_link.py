@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -192,8 +193,14 @@ def graph(args: argparse.Namespace) -> None:
            "--duration-s", str(args.graph_duration_s), "--record", str(bag), "--out", str(out / "run"), "--json",
            "--timeout-s", "20000"]
     started = time.monotonic()
+    cpu_before = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     wall = time.monotonic() - started
+    cpu_after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    # CPU time of the experiment and every node it ran (each waited for): with the cores the machine has,
+    # the run cannot be faster than cpu / cores, whatever the scheduling
+    cpu_s = (cpu_after.ru_utime - cpu_before.ru_utime) + (cpu_after.ru_stime - cpu_before.ru_stime)
+    cores = os.cpu_count() or 1
     if proc.returncode != 0:
         print(proc.stderr[-3000:])
         raise SystemExit(f"experiment failed ({proc.returncode})")
@@ -202,6 +209,8 @@ def graph(args: argparse.Namespace) -> None:
     print(f"graph: Type-1 {args.graph_duration_s:g} s through deep_space: {wall:.0f} s wall including start-up "
           f"({args.graph_duration_s / wall:.0f}x real time), the run itself {link['wall_s']:.0f} s "
           f"({link['speed_x_real_time']:.0f}x); goal >= 100x")
+    print(f"  CPU time of the experiment and its nodes {cpu_s:.0f} s ({1000 * cpu_s / args.graph_duration_s:.1f} ms "
+          f"per simulated second): on {cores} cores at best {args.graph_duration_s * cores / cpu_s:.0f}x real time")
     model = load_link_model("deep_space")
     streams = link["streams"]
     octets = {"star_tracker": 120, "grs1": 64, "grs2": 64, "executed_torque": 64}
