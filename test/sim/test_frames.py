@@ -79,6 +79,24 @@ def test_prefix_product_equals_sequential_product():
     np.testing.assert_array_equal(quat_prefix_product(q[:1]), q[:1])
 
 
+@pytest.mark.parametrize("count", [0, 1, 15, 16, 17, 255, 256, 257, 4099])
+def test_prefix_product_with_an_initial_attitude_at_every_block_boundary(count):
+    """The blocked scan (blocks of 16, padded tails, recursive carries) with q_init on the left:
+    the left-to-right product within 4 eps per product of either chain."""
+    q = _random_unit_quats(count)
+    initial = _random_unit_quats(1)[0]
+    expected, current = np.empty((count, 4)), initial
+    for k in range(count):
+        current = quat_multiply(current, q[k])
+        expected[k] = current
+    got = quat_prefix_product(q, initial_xyzw=initial)
+    assert got.shape == (count, 4) and got.flags.c_contiguous
+    np.testing.assert_allclose(got, expected, rtol=0, atol=8 * np.finfo(np.float64).eps * max(count, 1))
+    np.testing.assert_array_equal(quat_prefix_product(q[:1], initial_xyzw=initial), quat_multiply(initial, q[:1]))
+    with pytest.raises(ValueError, match="q: wrong shape"):
+        quat_prefix_product(q[:, :3])
+
+
 def test_cross_and_matrix_helpers_equal_numpy():
     a, b = RNG.standard_normal((20, 3)), RNG.standard_normal((20, 3))
     np.testing.assert_array_equal(cross(a, b), np.cross(a, b))

@@ -13,8 +13,8 @@ gyroscopic term)::
 
 The implicit equation is solved by Picard (fixed-point) iteration over a block of steps at once:
 the rates of the whole block follow from a cumulative sum of the increments, the gyroscopic term
-is re-evaluated, and so on to convergence; the attitude then follows from a parallel-prefix
-(Hillis-Steele) product of the step rotations. For one step this is the plain fixed-point
+is re-evaluated, and so on to convergence; the attitude then follows from a blocked prefix product
+of the step rotations (:func:`.frames.quat_prefix_product`). For one step this is the plain fixed-point
 iteration of the streaming simulator, for n steps the vectorised batch solution: both converge to
 the same discrete trajectory. A block that does not converge (large rates) is split in halves.
 """
@@ -32,7 +32,6 @@ from .frames import (
     cross,
     cross_rows,
     quat_from_rotvec,
-    quat_multiply,
     quat_prefix_product,
 )
 
@@ -121,14 +120,16 @@ def _solve_block_rows(omega_start: np.ndarray, torque: np.ndarray, inertia: np.n
     each element sees the same operations in the same order as in (n, 3) layout (bitwise equal).
     """
     count = torque.shape[0]
-    torque_rows = np.ascontiguousarray(torque.T)
-    stacked = np.empty((3, count + 1))
+    # every buffer of the iteration in one allocation (one large block is mapped in huge pages,
+    # several medium ones page by page), reused by every iteration; two for the rates (this
+    # iterate and the previous one), rows of count + 1 so that the cumulative sum has its start
+    block = np.empty((9, 3, count + 1))
+    stacked, omega, previous = block[0], block[1], block[2]
+    torque_rows, omega_dot, omega_mid, moment, work, gyroscopic = (rows[:, :count] for rows in block[3:])
+    np.copyto(torque_rows, torque.T)
     stacked[:, 0] = omega_start
-    # buffers reused by every iteration (two for the rates: this iterate and the previous one)
-    omega, previous = np.empty((3, count + 1)), np.empty((3, count + 1))
-    omega_dot, omega_mid, moment, work = (np.empty((3, count)) for _ in range(4))
+    gyroscopic.fill(0.0)
     scratch = np.empty(count)
-    gyroscopic = np.zeros((3, count))
     previous_change = np.inf
     with np.errstate(over="ignore", invalid="ignore"):
         for iteration in range(_MAX_PICARD_ITERATIONS):
@@ -156,8 +157,12 @@ def _solve_block_rows(omega_start: np.ndarray, torque: np.ndarray, inertia: np.n
 
 
 def _rows_to_vectors(*rows: np.ndarray) -> tuple[np.ndarray, ...]:
-    # (n, 3) C-ordered, as before: consumers' reductions (e.g. means over sub-steps) sum in memory order
-    return tuple(np.ascontiguousarray(r.T) for r in rows)
+    # (n, 3) C-ordered, as before: consumers' reductions (e.g. means over sub-steps) sum in memory order;
+    # one allocation for all of them (see _solve_block_rows)
+    out = np.empty((len(rows), rows[0].shape[1], 3))
+    for target, source in zip(out, rows, strict=True):
+        np.copyto(target, source.T)
+    return tuple(out)
 
 
 def _solve_rates(omega_start: np.ndarray, torque: np.ndarray, inertia: np.ndarray,
@@ -212,6 +217,7 @@ def propagate_attitude(quat_xyzw: ArrayLike, omega_rad_s: ArrayLike, torque_n_m:
     inertia_inv = np.linalg.inv(inertia) if inertia_inv_kg_m2 is None else np.asarray(inertia_inv_kg_m2)
     omega, omega_mid, omega_dot = _solve_rates(np.asarray(omega_rad_s, dtype=np.float64), torque,
                                                inertia, inertia_inv, dt_s)
-    increments = quat_from_rotvec(omega_mid * dt_s)
-    quat = quat_multiply(np.asarray(quat_xyzw, dtype=np.float64), quat_prefix_product(increments))
+    increments = quat_from_rotvec(np.multiply(omega_mid, dt_s))
+    # q_{k+1} = q_0 (increment_0 ... increment_k): the initial attitude rides in the scan
+    quat = quat_prefix_product(increments, initial_xyzw=quat_xyzw)
     return AttitudeSteps(quat, omega, omega_mid, omega_dot)

@@ -194,20 +194,34 @@ class NoiseStreams:
         """Whether a source is switched on."""
         return self._enabled[source_name]
 
-    def draw_source(self, source_name: str, n: int) -> np.ndarray:
+    def draw_source(self, source_name: str, n: int, out: np.ndarray | None = None) -> np.ndarray:
         """The next n steps of one source (the field of :meth:`draw` of that name, shape (n, ...)).
 
         Each source has its own generator, so drawing sources one by one, in any order and in any
-        blocking of the steps, gives bitwise the numbers of :meth:`draw`.
+        blocking of the steps, gives bitwise the numbers of :meth:`draw`. ``out``, a C-contiguous
+        array of that shape (e.g. the simulator's output array that the noise is added to),
+        receives the draws instead of a new array.
         """
+        shape = (n, 3) if source_name == "srp" else (n, *_SOURCE_SHAPES[source_name])
+        if out is not None and (out.shape != shape or not out.flags.c_contiguous):
+            raise ValueError(f"out: expected a C-contiguous array of shape {shape} for {source_name!r}, "
+                             f"got shape {out.shape}")
         if source_name == "srp":
-            return self._srp(n)
-        return self._white(source_name, (n, *_SOURCE_SHAPES[source_name]))
+            values = self._srp(n)
+            if out is None:
+                return values
+            np.copyto(out, values)
+            return out
+        return self._white(source_name, shape, out)
 
-    def _white(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    def _white(self, name: str, shape: tuple[int, ...], out: np.ndarray | None = None) -> np.ndarray:
         if not self._enabled[name]:
-            return np.zeros(shape)
-        draws = self._rngs[name].standard_normal(shape)
+            if out is None:
+                return np.zeros(shape)
+            out.fill(0.0)
+            return out
+        # drawn in place (the same numbers, in the same order, as a new array of this shape)
+        draws = self._rngs[name].standard_normal(shape) if out is None else self._rngs[name].standard_normal(out=out)
         draws *= self._std[name]  # in place: the same products as std * draws, no second array
         return draws
 

@@ -31,20 +31,15 @@ from numpy.typing import ArrayLike
 from .config import SimConfig, TimingConfig
 from .dynamics import propagate_attitude
 from .effects import Effect
-from .frames import apply_matrix, crf_to_tmrf
-from .grs import coupling_acceleration_m_s2, voltages_from_accelerations
+from .frames import crf_to_tmrf
 from .maneuver import SquareWaveManeuver
 from .noise import NoiseStreams
+from .readout import GRS_FIELDS, GrsConstants, grs_readouts_into
 from .star_tracker import star_tracker_covariance_rad2, star_tracker_measurement
 from .timing import actuation_weights, apply_actuation
 
-#: Steps per chunk of the readout computation (temporaries of a few 100 kB).
+#: Steps per chunk of the readout computation (temporaries of a few 100 kB, in cache).
 _READOUT_CHUNK_STEPS = 4096
-#: The noise sources of the readouts (drawn chunk by chunk).
-_READOUT_SOURCES = ("lfs_translational", "lfs_rotational", "tm_environment", "grs_voltage", "star_tracker")
-#: Per-GRS fields of a block and their widths.
-_GRS_FIELDS = (("angular_true", 3), ("linear_true", 3), ("linear_maneuver", 3), ("angular_meas", 3),
-               ("linear_meas", 3), ("angular_sf", 3), ("linear_sf", 3), ("com_offset", 3), ("voltages", 6))
 
 __all__ = [
     "SimOutput",
@@ -140,7 +135,12 @@ class SimSample:
 
 @dataclass(frozen=True)
 class SimOutput:
-    """n consecutive samples: the fields of :class:`SimSample` with a leading axis n."""
+    """n consecutive samples: the fields of :class:`SimSample` with a leading axis n.
+
+    Fields that are the same at every sample are read-only broadcast views of one value rather
+    than copies: ``st_cov_rad2`` always, and the truth's scale factors and c.m. offsets when no
+    effect changes them (``np.array(field)`` gives a writable copy).
+    """
 
     t_s: np.ndarray
     st_quat_xyzw: np.ndarray
@@ -214,7 +214,14 @@ class Simulator:
         self._quat = np.array(config.spacecraft.initial_attitude_xyzw, dtype=np.float64)
         self._omega = np.array(config.spacecraft.initial_rate_rad_s, dtype=np.float64)
         self._inertia_inv = np.linalg.inv(config.spacecraft.inertia_kg_m2)
-        self._crf_to_tmrf = [crf_to_tmrf(s.grs_id, config.grs.alpha_rad) for s in config.grs.sensors]
+        sensors = config.grs.sensors
+        self._grs_constants = GrsConstants(
+            grs_ids=tuple(s.grs_id for s in sensors),
+            crf_to_tmrf=np.stack([crf_to_tmrf(s.grs_id, config.grs.alpha_rad) for s in sensors]),
+            com_offset_m=np.stack([np.asarray(s.com_offset_m, dtype=np.float64) for s in sensors]),
+            angular_scale_factors=np.stack([np.asarray(s.angular_scale_factors, dtype=np.float64) for s in sensors]),
+            linear_scale_factors=np.stack([np.asarray(s.linear_scale_factors, dtype=np.float64) for s in sensors]),
+        )
         self._st_cov_rad2 = star_tracker_covariance_rad2(config.noise.star_tracker.sigma_rad)
         self._effects = tuple(effects)
         timing = config.timing
@@ -337,8 +344,11 @@ class Simulator:
         times = self._t0_s + step_numbers * self._dt_s
         t_start, t_end = times[:-1], times[1:]
         noise = self._noise  # one generator per source: drawing them one by one is bitwise draw(count)
-
-        torque = self._actuate(command) + noise.draw_source("thruster_torque", count)
+        # applied torque and spacecraft acceleration in one allocation; each noise is drawn into the
+        # array it is added to (noise + x is the sum x + noise)
+        spacecraft = np.empty((2, count, 3))
+        torque = noise.draw_source("thruster_torque", count, out=spacecraft[0])
+        torque += self._actuate(command)
         inertia = config.spacecraft.inertia_kg_m2
         for effect in self._hooks:
             torque = effect.applied_torque_n_m(t_start, torque)
@@ -347,30 +357,47 @@ class Simulator:
         inertia_inv = self._inertia_inv if inertia is config.spacecraft.inertia_kg_m2 else None
         attitude = propagate_attitude(self._quat, self._omega, torque, inertia, self._dt_s, inertia_inv)
 
-        force = noise.draw_source("thruster_force", count)
+        a_sc = noise.draw_source("thruster_force", count, out=spacecraft[1])
         if force_cmd_n is not None:
-            force = force + _as_commands("force_cmd_n", force_cmd_n, count)
-        a_sc = force / config.spacecraft.mass_kg + noise.draw_source("srp", count)
+            a_sc += _as_commands("force_cmd_n", force_cmd_n, count)
+        a_sc /= config.spacecraft.mass_kg
+        a_sc += noise.draw_source("srp", count)
         for effect in self._hooks:
             a_sc = effect.spacecraft_acceleration_m_s2(t_start, a_sc)
 
         # Readouts, step by step independent: in chunks of steps, so that their temporaries stay
-        # small (in cache, reused from the heap rather than fresh pages) and the readout noise is
-        # drawn chunk by chunk; effects see the whole block at once (some filter over time).
-        sensors = config.grs.sensors
-        grs = {key: np.empty((count, len(sensors), width)) for key, width in _GRS_FIELDS}
+        # small (in cache, reused from the heap rather than fresh pages), with the readout noise
+        # drawn chunk by chunk into the output arrays; effects see the whole block at once (some
+        # filter over time) and one GRS at a time (their hooks are per GRS).
+        sensor_count = len(config.grs.sensors)
+        # without effects, the scale factors and offsets are the configured ones at every step:
+        # read-only broadcast views instead of copies
+        constant = {} if self._hooks else {
+            "com_offset": self._grs_constants.com_offset_m,
+            "angular_sf": self._grs_constants.angular_scale_factors,
+            "linear_sf": self._grs_constants.linear_scale_factors,
+        }
+        grs = {key: np.broadcast_to(constant[key], (count, sensor_count, width)) if key in constant
+               else np.empty((count, sensor_count, width)) for key, width in GRS_FIELDS}
         st_quat = np.empty((count, 4))
         chunk = max(count, 1) if self._hooks else _READOUT_CHUNK_STEPS
+        groups = [slice(i, i + 1) for i in range(sensor_count)] if self._hooks else [slice(0, sensor_count)]
+        tm_noise = np.empty((min(chunk, count), sensor_count, 3))
+        star_tracker_noise = np.empty((min(chunk, count), 3))
         for start in range(0, count, chunk):
             window = slice(start, min(start + chunk, count))
             size = window.stop - start
-            readout_noise = {name: noise.draw_source(name, size) for name in _READOUT_SOURCES}
-            for index, sensor in enumerate(sensors):
-                readout = self._grs_block(index, sensor.grs_id, t_end[window], attitude.omega_dot_rad_s2[window],
-                                          attitude.omega_mid_rad_s[window], a_sc[window], readout_noise)
-                for key, value in readout.items():
-                    grs[key][window, index] = value
-            quat = star_tracker_measurement(attitude.quat_xyzw[window], readout_noise["star_tracker"])
+            block = {key: array[window] for key, array in grs.items() if key not in constant}
+            noise.draw_source("lfs_rotational", size, out=block["angular_meas"])
+            noise.draw_source("lfs_translational", size, out=block["linear_meas"])
+            noise.draw_source("grs_voltage", size, out=block["voltages"])
+            noise.draw_source("tm_environment", size, out=tm_noise[:size])
+            for group in groups:
+                grs_readouts_into(block, tm_noise[:size, group], group, self._grs_constants, t_end[window],
+                                  attitude.omega_dot_rad_s2[window], attitude.omega_mid_rad_s[window],
+                                  a_sc[window], self._hooks)
+            error = noise.draw_source("star_tracker", size, out=star_tracker_noise[:size])
+            quat = star_tracker_measurement(attitude.quat_xyzw[window], error)
             for effect in self._hooks:
                 quat = effect.star_tracker_quat_xyzw(t_end[window], quat)
             st_quat[window] = quat
@@ -394,7 +421,8 @@ class Simulator:
             grs_linear_scale_factors=grs["linear_sf"],
             com_offset_m=grs["com_offset"],
         )
-        return SimOutput(t_end, st_quat, np.tile(self._st_cov_rad2, (count, 1)), grs["voltages"], truth)
+        # the reported covariance is the same at every sample: a read-only broadcast view
+        return SimOutput(t_end, st_quat, np.broadcast_to(self._st_cov_rad2, (count, 9)), grs["voltages"], truth)
 
     def _actuate(self, command: np.ndarray) -> np.ndarray:
         """Mean thrust torque over each step from the commands (exact delay and lag; :mod:`.timing`).
@@ -415,41 +443,6 @@ class Simulator:
         if head:
             self._command_history = np.concatenate((history, command))[-head:]
         return out
-
-    def _grs_block(self, index: int, grs_id: int, t_end: np.ndarray, omega_dot: np.ndarray,
-                   omega_mid: np.ndarray, a_sc: np.ndarray, noise: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Readouts of one GRS over a block (arrays with leading axis n; ``noise`` by source name)."""
-        sensor = self._config.grs.sensors[index]
-        count = t_end.shape[0]
-        crf_to_tmrf_i = self._crf_to_tmrf[index]
-        com_offset = sensor.com_offset_m
-        angular_sf, linear_sf = sensor.angular_scale_factors, sensor.linear_scale_factors
-        for effect in self._hooks:
-            com_offset = effect.com_offset_m(t_end, grs_id, com_offset)
-        coupling = coupling_acceleration_m_s2(omega_dot, omega_mid, com_offset)
-        angular_true = apply_matrix(crf_to_tmrf_i, omega_dot)
-        linear_maneuver = apply_matrix(crf_to_tmrf_i, coupling)
-        linear_true = apply_matrix(crf_to_tmrf_i, a_sc + coupling)
-        angular_meas = angular_true + noise["lfs_rotational"][:, index]
-        linear_meas = linear_true + noise["lfs_translational"][:, index] + noise["tm_environment"][:, index]
-        for effect in self._hooks:
-            angular_meas, linear_meas = effect.grs_accelerations(t_end, grs_id, angular_meas, linear_meas)
-            angular_sf, linear_sf = effect.grs_scale_factors(t_end, grs_id, angular_sf, linear_sf)
-        voltages = voltages_from_accelerations(angular_meas, linear_meas, angular_sf, linear_sf)
-        voltages = voltages + noise["grs_voltage"][:, index]
-        for effect in self._hooks:
-            voltages = effect.grs_voltages_v(t_end, grs_id, voltages)
-        return {
-            "angular_true": angular_true,
-            "linear_true": linear_true,
-            "linear_maneuver": linear_maneuver,
-            "angular_meas": angular_meas,
-            "linear_meas": linear_meas,
-            "angular_sf": np.broadcast_to(angular_sf, (count, 3)),
-            "linear_sf": np.broadcast_to(linear_sf, (count, 3)),
-            "com_offset": np.broadcast_to(com_offset, (count, 3)),
-            "voltages": voltages,
-        }
 
 
 def simulate_batch(config: SimConfig, seed: int | None, torque_cmd_n_m: ArrayLike, t0_s: float = 0.0,

@@ -1,0 +1,158 @@
+"""GRS readouts of a block of steps, computed into the simulator's output arrays.
+
+The formulas are those of :mod:`.grs` (coupling ``omega_dot x d + w_m x (w_m x d)``, ``C_i``
+rotations, readout noise, voltage conversion), evaluated component by component for all GRS at
+once (per-GRS matrices and offsets broadcast over a sensor axis) and written straight into the
+run's (n, sensors, width) arrays: the readout noise is drawn into the arrays that it is added to,
+and no per-sensor temporary is copied. Every output element gets the floating-point operations of
+the plain formulas in the same order (``a + b`` and ``b + a`` are the same sum), so the results are
+bitwise those of :func:`.grs.coupling_acceleration_m_s2`, :func:`.frames.apply_matrix` and
+:func:`.grs.voltages_from_accelerations`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .effects import Effect
+from .frames import apply_matrix_components
+
+__all__ = ["GRS_FIELDS", "GrsConstants", "grs_readouts_into"]
+
+#: Per-GRS output arrays of a block and their widths.
+GRS_FIELDS = (("angular_true", 3), ("linear_true", 3), ("linear_maneuver", 3), ("angular_meas", 3),
+              ("linear_meas", 3), ("angular_sf", 3), ("linear_sf", 3), ("com_offset", 3), ("voltages", 6))
+
+#: Electrode axis x, y, z of each angular readout in the voltage differences: psi, phi, theta.
+_DIFFERENCE_ANGLE = (2, 0, 1)
+
+
+@dataclass(frozen=True)
+class GrsConstants:
+    """The configured per-GRS quantities, stacked over the sensors (leading axis: sensor).
+
+    Attributes
+    ----------
+    grs_ids : tuple of int
+        Sensor ids (1, 2).
+    crf_to_tmrf : numpy.ndarray
+        (sensors, 3, 3) C_i.
+    com_offset_m : numpy.ndarray
+        (sensors, 3) d_i, CRF [m].
+    angular_scale_factors : numpy.ndarray
+        (sensors, 3) [rad s^-2 V^-1].
+    linear_scale_factors : numpy.ndarray
+        (sensors, 3) [m s^-2 V^-1].
+    """
+
+    grs_ids: tuple[int, ...]
+    crf_to_tmrf: np.ndarray
+    com_offset_m: np.ndarray
+    angular_scale_factors: np.ndarray
+    linear_scale_factors: np.ndarray
+
+
+def _cross_components(a: Sequence[np.ndarray], b: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
+    """``a x b`` by components (the expressions of :func:`.frames.cross`)."""
+    ax, ay, az = a
+    bx, by, bz = b
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+def _per_sensor(value: np.ndarray) -> np.ndarray:
+    """A hook's (3,) or (n, 3) value of one sensor as (1, 3) or (n, 1, 3) (a sensor axis of one)."""
+    return np.asarray(value, dtype=np.float64)[..., None, :]
+
+
+def grs_readouts_into(out: dict[str, np.ndarray], tm_noise: np.ndarray, sensors: slice, constants: GrsConstants,
+                      t_end: np.ndarray, omega_dot: np.ndarray, omega_mid: np.ndarray, a_sc: np.ndarray,
+                      hooks: Sequence[Effect] = ()) -> None:
+    """Readouts of the GRS ``sensors`` over a block of m steps, into ``out``.
+
+    Parameters
+    ----------
+    out : dict of numpy.ndarray
+        The block's output arrays by :data:`GRS_FIELDS` name, (m, sensors, width) views; on entry
+        ``angular_meas``, ``linear_meas`` and ``voltages`` hold the block's scaled LFS rotational,
+        LFS translational and voltage noise, on return the readouts. ``com_offset``,
+        ``angular_sf`` and ``linear_sf`` may be left out (without hooks they are the constants).
+    tm_noise : numpy.ndarray
+        (m, sensors, 3) TM environment noise [m s^-2].
+    sensors : slice
+        Which sensors (all at once without hooks; one at a time with hooks, which are per GRS).
+    constants : GrsConstants
+        Configured per-GRS quantities (all sensors).
+    t_end : numpy.ndarray
+        (m,) sample times [s] (for the hooks).
+    omega_dot, omega_mid, a_sc : numpy.ndarray
+        (m, 3) mean angular acceleration [rad s^-2], midpoint rate [rad/s] and spacecraft
+        acceleration [m s^-2], CRF.
+    hooks : sequence of Effect
+        Effects (in order); only with a single sensor.
+    """
+    grs_ids = constants.grs_ids[sensors]
+    if hooks and len(grs_ids) != 1:
+        raise ValueError(f"sensors: effects are applied one GRS at a time, got {len(grs_ids)} sensors")
+    view = {key: array[:, sensors] for key, array in out.items()}
+    com_offset: np.ndarray = constants.com_offset_m[sensors]
+    angular_sf: np.ndarray = constants.angular_scale_factors[sensors]
+    linear_sf: np.ndarray = constants.linear_scale_factors[sensors]
+    if hooks:
+        grs_id = grs_ids[0]
+        offset = constants.com_offset_m[sensors][0]
+        for effect in hooks:
+            offset = effect.com_offset_m(t_end, grs_id, offset)
+        com_offset = _per_sensor(offset)
+    if "com_offset" in view:
+        view["com_offset"][...] = com_offset
+
+    # CRF components with a sensor axis of one, d with the sensors' axis: products are (m, sensors)
+    rate_dot = [omega_dot[:, None, k] for k in range(3)]
+    rate = [omega_mid[:, None, k] for k in range(3)]
+    offset_xyz = [com_offset[..., k] for k in range(3)]
+    rotation = _cross_components(rate_dot, offset_xyz)
+    centripetal = _cross_components(rate, _cross_components(rate, offset_xyz))
+    coupling = [r + c for r, c in zip(rotation, centripetal, strict=True)]
+    total = [a_sc[:, None, k] + coupling[k] for k in range(3)]
+    matrices = constants.crf_to_tmrf[sensors]
+    scratch = np.empty(view["angular_true"].shape[:2])
+    for key, components in (("angular_true", rate_dot), ("linear_maneuver", coupling), ("linear_true", total)):
+        target = view[key]
+        apply_matrix_components(matrices, components, [target[..., k] for k in range(3)], scratch)
+
+    angular_meas, linear_meas = view["angular_meas"], view["linear_meas"]
+    angular_meas += view["angular_true"]  # noise + true: the sum true + noise
+    linear_meas += view["linear_true"]
+    linear_meas += tm_noise
+    if hooks:
+        angular, linear = angular_meas[:, 0], linear_meas[:, 0]
+        angular_sf_i, linear_sf_i = angular_sf[0], linear_sf[0]
+        for effect in hooks:
+            angular, linear = effect.grs_accelerations(t_end, grs_id, angular, linear)
+            angular_sf_i, linear_sf_i = effect.grs_scale_factors(t_end, grs_id, angular_sf_i, linear_sf_i)
+        angular_meas[:, 0] = angular
+        linear_meas[:, 0] = linear
+        angular_sf, linear_sf = _per_sensor(angular_sf_i), _per_sensor(linear_sf_i)
+    if "angular_sf" in view:
+        view["angular_sf"][...] = angular_sf
+        view["linear_sf"][...] = linear_sf
+
+    # voltages: noise + 0.5 (sum +- difference) per electrode axis (voltages_from_accelerations)
+    voltages = view["voltages"]
+    for axis, angle in enumerate(_DIFFERENCE_ANGLE):
+        difference = angular_meas[..., angle] / angular_sf[..., angle]
+        total_v = linear_meas[..., axis] / linear_sf[..., axis]
+        half = np.add(total_v, difference, out=scratch)
+        half *= 0.5
+        voltages[..., 2 * axis] += half
+        half = np.subtract(total_v, difference, out=scratch)
+        half *= 0.5
+        voltages[..., 2 * axis + 1] += half
+    if hooks:
+        result = voltages[:, 0]
+        for effect in hooks:
+            result = effect.grs_voltages_v(t_end, grs_id, result)
+        voltages[:, 0] = result
