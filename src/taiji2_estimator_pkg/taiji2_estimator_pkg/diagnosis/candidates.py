@@ -87,6 +87,9 @@ DELAY_RANGE_S = TIMING_REACH_S
 
 _AXES = "xyz"
 
+ACTUATED_KEPT = 48
+"""(delay, lag) pairs whose thrust a context keeps (2.6 MB each for 3 h at 10 Hz; the knots are ~40)."""
+
 
 @dataclass(frozen=True)
 class CandidateContext:
@@ -123,6 +126,21 @@ class CandidateContext:
     timing_base: dict[str, float] = field(default_factory=dict)
     step_from_s: float | None = None
     ramp_from_s: float | None = None
+    actuated: dict[tuple[float, float], np.ndarray] = field(default_factory=dict, compare=False, repr=False)
+
+    def actuated_torque(self, delay_s: float, time_constant_s: float) -> np.ndarray:
+        """Mean thrust torque (n, 3) [N m] of the raw commands under a delay and a lag
+        (:func:`.channels.actuated_torque`), kept for the contexts derived from this one: the onset
+        scans and the knot signatures ask for the same few (delay, lag) many times, and the thrust
+        does not depend on the onset (the step is applied to the channel change)."""
+        key = (float(delay_s), float(time_constant_s))
+        moved = self.actuated.get(key)
+        if moved is None:
+            moved = actuated_torque(self.readouts.torque_raw_n_m, key[0], key[1], self.readouts.dt_s)
+            if len(self.actuated) >= ACTUATED_KEPT:  # the joint timing fit visits continuous values
+                self.actuated.pop(next(iter(self.actuated)))
+            self.actuated[key] = moved
+        return moved
 
     def at_onset(self, kind: str, onset_s: float | None) -> CandidateContext:
         """The context of a signature that starts at ``onset_s`` (None: from the start) as a ``"step"``
@@ -160,7 +178,8 @@ class Candidate:
         *measured* readout carries ``2 k a^3``, which for a readout that is a single square wave,
         whose square is nearly constant, can outweigh the first-order signature); None: linear.
     coefficients : callable or None
-        ``coefficients(theta) -> (m,)`` weights of the series columns.
+        ``coefficients(theta) -> (m,)`` weights of the series columns (``(G, m)`` for a (G,) array of
+        magnitudes: the exact scan evaluates a grid at once).
     bound : callable or None
         ``bound(ctx) -> |theta| max`` where the series holds (for the nonlinearity: k a_max = 0.2).
     grid : numpy.ndarray or None
@@ -169,6 +188,9 @@ class Candidate:
     exact : callable or None
         ``exact(ctx, theta) -> (n, 15)``: the channel change at any magnitude, not interpolated
         (timing candidates; conditioned on ``ctx.timing_base``).
+    series_term : callable or None
+        ``series_term(ctx, j) -> c_j`` alone (knot signatures: a weighted sum of the series then builds
+        only the knots of non-zero weight, two of them, instead of every knot; :meth:`series_sum`).
     """
 
     name: str
@@ -182,6 +204,14 @@ class Candidate:
     bound: Callable[[CandidateContext], float] | None = None
     grid: np.ndarray | None = None
     exact: Callable[[CandidateContext, float], np.ndarray] | None = None
+    series_term: Callable[[CandidateContext, int], np.ndarray] | None = None
+
+    def series_sum(self, ctx: CandidateContext, weights: np.ndarray) -> np.ndarray:
+        """``sum_j weights_j c_j`` of the series columns; the terms of zero weight are not built when the
+        candidate can build one term alone (the same sum: a zero term adds nothing)."""
+        if self.series_term is None or not np.any(weights):
+            return sum(w * c for w, c in zip(weights, self.series(ctx), strict=True))
+        return sum(w * self.series_term(ctx, j) for j, w in enumerate(weights) if w != 0.0)
 
     @property
     def is_timing(self) -> bool:
@@ -413,9 +443,10 @@ def _nonlinearity(grs: int, readout: str) -> Candidate:
     def series(ctx: CandidateContext) -> list[np.ndarray]:
         return powers(ctx, (2, 3, 4, 5))
 
-    def coefficients(theta: float) -> np.ndarray:
+    def coefficients(theta: float | np.ndarray) -> np.ndarray:
         # a_meas = a + k a^2 inverted: k a^2 = k m^2 - 2 k^2 m^3 + 5 k^3 m^4 - 14 k^4 m^5 + ... (m = a_meas)
-        return np.array([theta, -2.0 * theta ** 2, 5.0 * theta ** 3, -14.0 * theta ** 4])
+        theta = np.asarray(theta, dtype=np.float64)
+        return np.stack([theta, -2.0 * theta ** 2, 5.0 * theta ** 3, -14.0 * theta ** 4], axis=-1)
 
     unit = "1/(rad s^-2)" if readout in ANGULAR_READOUTS else "1/(m s^-2)"
 
@@ -517,7 +548,7 @@ def _actuation_change(ctx: CandidateContext, delay_s: float, time_constant_s: fl
     model, raw = ctx.model, ctx.readouts.torque_raw_n_m
     if delay_s == model.delay_s and time_constant_s == model.time_constant_s:
         return np.zeros((raw.shape[0], 15))
-    moved = actuated_torque(raw, delay_s, time_constant_s, ctx.readouts.dt_s)
+    moved = ctx.actuated_torque(delay_s, time_constant_s)
     return _torque_column(ctx, moved - ctx.readouts.torque_cmd_n_m)
 
 
@@ -540,12 +571,15 @@ def _knot_candidate(name: str, param: str, knots: np.ndarray,
     nonzero = knots[knots != 0.0]
     step = float(np.min(np.diff(knots)))
 
-    def coefficients(theta: float) -> np.ndarray:
+    def coefficients(theta: float | np.ndarray) -> np.ndarray:
         # hat functions: the weight of each non-zero knot at theta (the zero knot's column is zero)
-        return np.array([np.interp(theta, knots, (knots == knot).astype(float)) for knot in nonzero])
+        return np.stack([np.interp(theta, knots, (knots == knot).astype(float)) for knot in nonzero], axis=-1)
 
     def series(ctx: CandidateContext) -> list[np.ndarray]:
         return [channels_at(ctx, float(knot)) for knot in nonzero]
+
+    def series_term(ctx: CandidateContext, j: int) -> np.ndarray:
+        return channels_at(ctx, float(nonzero[j]))
 
     def build(ctx: CandidateContext) -> list[np.ndarray]:
         # the central secant over one knot step about 0 (exact where the signature is linear)
@@ -554,7 +588,8 @@ def _knot_candidate(name: str, param: str, knots: np.ndarray,
                 else channels_at(ctx, step) / step]
 
     grid = np.unique(np.concatenate([np.linspace(knots[0], knots[-1], 2001), knots]))
-    return Candidate(name, "", (param,), "s", build, inject, series, coefficients, None, grid, channels_at)
+    return Candidate(name, "", (param,), "s", build, inject, series, coefficients, None, grid, channels_at,
+                     series_term)
 
 
 def _actuation_delay(model_delay_s: float, dt_s: float) -> Candidate:

@@ -240,7 +240,7 @@ class Record:
             if np.isfinite(limit):
                 grid = grid[np.abs(grid) <= limit]
                 grid = np.append(grid, 0.0) if grid.size else np.array([0.0])
-        weights = np.stack([coefficients(v) for v in grid])
+        weights = coefficients(grid)
         values = chi2_others - 2.0 * weights @ b + np.einsum("gi,ij,gj->g", weights, m, weights)
         best = int(np.argmin(values))
         lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
@@ -318,7 +318,12 @@ class Record:
         if value is None or candidate.series is None:
             return candidate.build(ctx)
         weights = self._secant_weights(candidate, value)
-        return [sum(w * c for w, c in zip(weights, candidate.series(ctx), strict=True))]
+        return [candidate.series_sum(ctx, weights)]
+
+    def column_ffts(self, candidate: Candidate, onset_s: float | str | None = "current") -> list[np.ndarray]:
+        """(K, 15) DFTs of a candidate's columns at its current linearisation, starting at its onset (or
+        at ``onset_s``), built anew (not those of the design)."""
+        return [column_fft(column, self.k_max) for column in self._candidate_columns(candidate, onset_s)]
 
     def set_onset(self, candidate: Candidate, onset_s: float | None) -> None:
         """Let a candidate start at ``onset_s`` (None: from the start): its columns (and series) rebuilt."""
@@ -345,21 +350,12 @@ class Record:
                       ) -> tuple[np.ndarray, np.ndarray]:
         """chi2 and ``log det`` of the candidate's parameter covariance for each trial onset, ``others``
         refitted (the profile likelihood over the onset; :func:`.onset.onset_posterior`)."""
-        p = candidate.n_params
-        scratch = [f"__onset__:{j}" for j in range(p)]
         chi2 = np.empty(len(onsets_s))
         log_det = np.empty(len(onsets_s))
+        fixed = self.design.conditioned(self.indices(others))  # the others' normal equations, factored once
         for i, onset in enumerate(onsets_s):
-            columns = self._candidate_columns(candidate, float(onset))
-            ffts = [column_fft(column, self.k_max) for column in columns]
-            if scratch[0] not in self.design.names:
-                self.design.append(self.whitener, scratch, ffts)
-            else:
-                for name, fft in zip(scratch, ffts, strict=True):
-                    self.design.replace(self.whitener, name, fft)
-            _, cov, chi2[i] = self.fit(list(others) + scratch)
-            block = cov[-p:, -p:]
-            sign, value = np.linalg.slogdet(block)
+            _, cov, chi2[i] = fixed.add(self.whitener, self.column_ffts(candidate, float(onset)))
+            sign, value = np.linalg.slogdet(cov)
             log_det[i] = value if sign > 0 else -np.inf
         return chi2, log_det
 
@@ -533,6 +529,5 @@ def fixed_change(ctx: CandidateContext, candidate: Candidate, theta: np.ndarray,
     if candidate.exact is not None:
         return candidate.exact(ctx, float(theta[0]))
     if candidate.series is not None and candidate.coefficients is not None:
-        weights = candidate.coefficients(float(theta[0]))
-        return sum(w * c for w, c in zip(weights, candidate.series(ctx), strict=True))
+        return candidate.series_sum(ctx, candidate.coefficients(float(theta[0])))
     return sum(value * column for value, column in zip(theta, candidate.build(ctx), strict=True))

@@ -35,6 +35,7 @@ covariance ``(X^T X)^-1``.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -43,7 +44,7 @@ from scipy.linalg import cho_factor, cho_solve
 
 from .model import NominalModel
 
-__all__ = ["Design", "NoiseSpectrum", "Whitener", "dft", "skew"]
+__all__ = ["ConditionedFit", "Design", "NoiseSpectrum", "Whitener", "dft", "skew"]
 
 N_SOURCES = 24
 _CHUNK = 4096  # bins per block (memory only)
@@ -91,6 +92,7 @@ class NoiseSpectrum:
     def __init__(self, model: NominalModel, com_offset_m: np.ndarray, n: int) -> None:
         self.model = model
         self.n = int(n)
+        self._conditioned: tuple | None = None  # (key, arrays) of :meth:`_conditioning`
         self.variances = np.concatenate((model.var_st, model.var_torque, model.var_force_acc,
                                          model.var_srp_innovation, model.var_angular[0], model.var_angular[1],
                                          model.var_linear[0], model.var_linear[1]))
@@ -179,23 +181,44 @@ class NoiseSpectrum:
             Gaussians per bin under the nominal model.
         """
         bins = np.asarray(bins)
-        marginal = np.empty_like(residual)
+        diag, scale, inverse, inverse_diag = self._conditioning(bins, extra_st)
+        marginal = residual / np.sqrt(diag)
         conditional = np.empty_like(residual)
-        idx = np.arange(3)
         for start in range(0, bins.shape[0], _CHUNK):
+            part = slice(start, start + _CHUNK)
+            y = residual[part] / scale[part]
+            conditional[part] = np.einsum("kij,kj->ki", inverse[part], y) / np.sqrt(inverse_diag[part])
+        return marginal, conditional
+
+    def _conditioning(self, bins: np.ndarray, extra_st: np.ndarray | None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per bin: the channels' PSD, the per-block scale, the scaled inverse ``S^-1`` and its diagonal.
+
+        Kept for the last (bins, extra) asked: the location scans and the "how far" rows view residuals
+        against the same spectrum several times per diagnosis, and the inverses were most of their cost.
+        """
+        key = (bins.shape[0], int(bins[0]) if bins.size else 0, int(bins[-1]) if bins.size else 0,
+               None if extra_st is None else hashlib.sha1(np.ascontiguousarray(extra_st).tobytes()).hexdigest())
+        if self._conditioned is not None and self._conditioned[0] == key:
+            return self._conditioned[1]
+        count = bins.shape[0]
+        diag = np.empty((count, 15))
+        scale = np.empty((count, 15))
+        inverse = np.empty((count, 15, 15), dtype=np.complex128)
+        idx = np.arange(3)
+        for start in range(0, count, _CHUNK):
             part = slice(start, start + _CHUNK)
             t = self.transfer(bins[part])
             s = np.einsum("kcs,s,kds->kcd", t, self.variances, t.conj(), optimize=True)
             if extra_st is not None:
                 s[:, idx, idx] += extra_st[part]
-            diag = np.real(np.einsum("kcc->kc", s))
-            scale = np.sqrt(np.median(diag, axis=0))
-            scaled = s / np.outer(scale, scale)[None]
-            y = residual[part] / scale[None, :]
-            inverse = np.linalg.inv(scaled)
-            marginal[part] = residual[part] / np.sqrt(diag)
-            conditional[part] = np.einsum("kij,kj->ki", inverse, y) / np.sqrt(np.real(np.einsum("kii->ki", inverse)))
-        return marginal, conditional
+            diag[part] = np.real(np.einsum("kcc->kc", s))
+            block = np.sqrt(np.median(diag[part], axis=0))
+            scale[part] = block[None, :]
+            inverse[part] = np.linalg.inv(s / np.outer(block, block)[None])
+        inverse_diag = np.real(np.einsum("kii->ki", inverse))
+        self._conditioned = (key, (diag, scale, inverse, inverse_diag))
+        return self._conditioned[1]
 
     def st_template(self, bins: np.ndarray, corner_hz: float) -> np.ndarray:
         """(K, 3) star-tracker-channel spectrum of an extra star-tracker error with knee f_knee = 1 Hz.
@@ -350,6 +373,13 @@ class Design:
         self.gram[:, j] = row
         self.xty[j] = float(column @ self.yw)
 
+    def conditioned(self, indices: Sequence[int] | np.ndarray) -> ConditionedFit:
+        """The fit of a fixed set of columns, factored once, to which columns that change are added
+        (:class:`ConditionedFit`: a profile over a parameter that moves only the added columns)."""
+        if self.x is None or self.yw is None:
+            raise RuntimeError("design built without its rows")
+        return ConditionedFit(self, np.asarray(indices, dtype=np.int64))
+
     def index(self, names: Sequence[str]) -> np.ndarray:
         """Column indices of ``names``."""
         lookup = {name: i for i, name in enumerate(self.names)}
@@ -421,3 +451,52 @@ class Design:
         factor = cho_factor(gram / np.outer(scale, scale) + 1e-13 * np.eye(idx.size))
         theta = cho_solve(factor, rhs / scale) / scale
         return yty - float(rhs @ theta)
+
+
+class ConditionedFit:
+    """Least squares of fixed columns ``X_o`` plus added columns ``W``, with ``X_o``'s part factored once.
+
+    With ``G_oo = X_o^T X_o`` factored, the added columns enter through the Schur complement
+    ``S = W^T W - C^T G_oo^-1 C`` (``C = X_o^T W``): their estimates ``S^-1 r`` with
+    ``r = W^T y - C^T G_oo^-1 X_o^T y``, their covariance ``S^-1`` and the chi-square
+    ``chi2_o - r^T S^-1 r``; the same as :meth:`Design.fit` of all the columns (to rounding), at the
+    cost of the products with ``W`` only (the onset profile adds a candidate's columns at each trial
+    onset to the same others).
+    """
+
+    def __init__(self, design: Design, indices: np.ndarray) -> None:
+        self.yw = design.yw
+        self.x_o = design.x[:, indices]
+        gram = design.gram[np.ix_(indices, indices)]
+        scale = np.sqrt(np.diag(gram)) if indices.size else np.ones(0)
+        scale[scale == 0.0] = 1.0
+        self.scale = scale
+        self.factor = cho_factor(gram / np.outer(scale, scale) + 1e-13 * np.eye(indices.size)) if indices.size \
+            else None
+        self.b_o = design.xty[indices]
+        self.a = self._solve(self.b_o[:, None])[:, 0]
+        self.chi2_o = design.yty - float(self.b_o @ self.a)
+
+    def _solve(self, rhs: np.ndarray) -> np.ndarray:
+        if self.factor is None:
+            return np.zeros_like(rhs)
+        return cho_solve(self.factor, rhs / self.scale[:, None]) / self.scale[:, None]
+
+    def projected_gram(self, whitener: Whitener, column_ffts: Sequence[np.ndarray]) -> np.ndarray:
+        """``W^T W - C^T G_oo^-1 C``: the normal matrix of added columns with the fixed ones projected out
+        (its normalised form is the correlation of their signatures beyond the fixed columns)."""
+        w = _real_rows(whitener.apply(np.stack(column_ffts, axis=2)))
+        c = self.x_o.T @ w
+        return w.T @ w - c.T @ self._solve(c)
+
+    def add(self, whitener: Whitener, column_ffts: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, float]:
+        """(estimates, covariance, chi2) of the added columns ((K, 15) DFTs each), the fixed ones refitted."""
+        w = _real_rows(whitener.apply(np.stack(column_ffts, axis=2)))
+        c = self.x_o.T @ w
+        schur = w.T @ w - c.T @ self._solve(c)
+        r = w.T @ self.yw - c.T @ self.a
+        scale = np.sqrt(np.maximum(np.diag(schur), 0.0))
+        scale[scale == 0.0] = 1.0
+        cov = np.linalg.inv(schur / np.outer(scale, scale) + 1e-13 * np.eye(w.shape[1])) / np.outer(scale, scale)
+        theta = cov @ r
+        return theta, cov, self.chi2_o - float(r @ theta)
