@@ -104,6 +104,17 @@ def test_mid_run_effect_is_named_with_its_onset(mid_run):
     assert result.plots["onsets"] and result.plots["onsets"][0][0] == top.key
 
 
+def test_aliases_hold_from_the_onset(mid_run):
+    """A torque gain about y and an inertia error about y are aliases from the start; from a modelled
+    onset they still are (each is compared with the other variants started at the same onset), so the
+    named one lists the other."""
+    _, _, result = mid_run
+    top = result.effects[0]
+    other = "inertia_error[y]" if top.key == "thruster_torque_gain[y]" else "thruster_torque_gain[y]"
+    assert top.parameters["onset_s"]["modelled"]
+    assert other in top.aliases, (top.key, top.aliases)
+
+
 def test_corrected_calibration_removes_the_bias(mid_run):
     """The torque gain biases the nominal G (torque channel); under the model extended with the named
     effect the re-calibrated G is back at the truth within 3 sigma, and the shift is reported in sigmas."""

@@ -404,10 +404,18 @@ class _Aliases:
         self.correlation = projected / np.outer(norm, norm)
 
     def of(self, candidate: Candidate | NoiseCandidate) -> list[str]:
-        """Variants (other than itself) whose signature correlates above the threshold."""
+        """Variants (other than itself) whose signature correlates above the threshold.
+
+        A candidate with a modelled onset is compared with the other variants started at the same onset
+        (a torque gain from t0 and an inertia error from t0 are as alike as from the start); the timing
+        variants, whose aliasing is decided by their exact scans from the start, are left out there.
+        """
         i = self.position.get(candidate.key)
         if i is None:
             return []
+        onset = self.record.onsets.get(candidate.key)
+        if onset is not None:
+            return self._of_at_onset(candidate, onset)
         row = self.correlation[i]
         out = []
         for j in np.flatnonzero(np.abs(row) >= self.threshold):
@@ -418,6 +426,22 @@ class _Aliases:
                     abs(self._exact_chi2(other) - self._exact_chi2(candidate)) >= self.floor:
                 continue
             out.append(other.key)
+        return out
+
+    def _of_at_onset(self, candidate: Candidate, onset_s: float) -> list[str]:
+        record = self.record
+        others = [c for c in self.single if c.key != candidate.key and c.grid is None]
+        fixed = record.design.conditioned(record.indices(record.nuisance))
+        own = record.column_ffts(candidate)
+        own_power = float(fixed.projected_gram(record.whitener, own)[0, 0])
+        out = []
+        for start in range(0, len(others), ALIAS_CHUNK):  # the other variants from the same onset
+            chunk = others[start:start + ALIAS_CHUNK]
+            ffts = [record.column_ffts(c, onset_s)[0] for c in chunk]
+            gram = fixed.projected_gram(record.whitener, [*own, *ffts])
+            norm = np.sqrt(np.maximum(np.diag(gram)[1:] * own_power, 1e-300))
+            correlation = gram[0, 1:] / norm
+            out += [c.key for c, rho in zip(chunk, correlation, strict=True) if abs(rho) >= self.threshold]
         return out
 
     def _exact_chi2(self, candidate: Candidate) -> float:
@@ -905,6 +929,9 @@ def _reports(full: Record, candidates: Sequence[Candidate], noise: NoiseCandidat
     rest = sorted((r for r in reports if not r.accepted), key=lambda r: -r.score)
     return first + rest
 
+
+ALIAS_CHUNK = 16
+"""Variants whose onset signatures are whitened at once in the alias check (memory: 16 design columns)."""
 
 _DELAY_FAMILIES = ("actuation_delay", "grs_time_offset")
 _RIDGE_LAGS_S = (0.0, 0.025, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3)  # starting splits of the group delay [s]
