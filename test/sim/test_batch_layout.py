@@ -143,3 +143,21 @@ def test_chunked_readouts_equal_one_block(monkeypatch):
     for field in fields(chunked.truth):
         np.testing.assert_array_equal(getattr(chunked.truth, field.name), getattr(one_block.truth, field.name),
                                       err_msg=field.name)
+
+
+def test_constant_fields_are_read_only_views_of_the_configured_values():
+    """Without effects the covariance, scale factors and offsets are broadcast views (no copies);
+    with an effect (which may change them per step) they are arrays of their own."""
+    cfg = load_config("type2")
+    commands = maneuver_torque_commands(cfg, 50)
+    plain = Simulator(cfg, seed=SEED).advance(commands)
+    expected = {"grs_angular_scale_factors": [s.angular_scale_factors for s in cfg.grs.sensors],
+                "grs_linear_scale_factors": [s.linear_scale_factors for s in cfg.grs.sensors],
+                "com_offset_m": [s.com_offset_m for s in cfg.grs.sensors]}
+    for name, values in expected.items():
+        field = getattr(plain.truth, name)
+        assert field.shape == (50, 2, 3) and not field.flags.writeable, name
+        np.testing.assert_array_equal(field, np.broadcast_to(np.asarray(values), (50, 2, 3)), err_msg=name)
+    assert plain.st_cov_rad2.shape == (50, 9) and not plain.st_cov_rad2.flags.writeable
+    with_effect = Simulator(cfg, seed=SEED, effects=[Effect()]).advance(commands)
+    assert all(getattr(with_effect.truth, name).flags.writeable for name in expected)

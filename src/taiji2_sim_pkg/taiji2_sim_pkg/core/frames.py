@@ -127,13 +127,16 @@ def apply_matrix_components(matrix: ArrayLike, components: Sequence[np.ndarray],
     a frame rotation about one axis 4.
     """
     matrix = np.asarray(matrix, dtype=np.float64)
+    leading = tuple(range(matrix.ndim - 2))
+    # the pattern of zero and unit entries, once per call (two reductions, not two per entry)
+    used = np.any(matrix != 0.0, axis=leading).tolist()
+    units = np.all(matrix == 1.0, axis=leading).tolist()
     for i, target in enumerate(out):
         first = True
         for j, values in enumerate(components):
-            coefficient = matrix[..., i, j]
-            if not np.any(coefficient):
+            if not used[i][j]:
                 continue
-            unit = bool(np.all(coefficient == 1.0))
+            coefficient, unit = matrix[..., i, j], units[i][j]
             if first:
                 if unit:
                     np.copyto(target, values)
