@@ -62,9 +62,10 @@ def _cross_components(a: Sequence[np.ndarray], b: Sequence[np.ndarray]) -> tuple
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
-def _per_sensor(value: np.ndarray) -> np.ndarray:
-    """A hook's (3,) or (n, 3) value of one sensor as (1, 3) or (n, 1, 3) (a sensor axis of one)."""
-    return np.asarray(value, dtype=np.float64)[..., None, :]
+def _sensor_major(value: np.ndarray) -> np.ndarray:
+    """A hook's (3,) or (m, 3) value of one sensor as (1, 1, 3) or (1, m, 3) (see below)."""
+    value = np.asarray(value, dtype=np.float64)
+    return value.reshape(1, 1, 3) if value.ndim == 1 else value[None]
 
 
 def grs_readouts_into(out: dict[str, np.ndarray], tm_noise: np.ndarray, sensors: slice, constants: GrsConstants,
@@ -96,32 +97,34 @@ def grs_readouts_into(out: dict[str, np.ndarray], tm_noise: np.ndarray, sensors:
     grs_ids = constants.grs_ids[sensors]
     if hooks and len(grs_ids) != 1:
         raise ValueError(f"sensors: effects are applied one GRS at a time, got {len(grs_ids)} sensors")
+    # Sensor-major (sensors, m) products: the long step axis innermost (numpy loops over the last
+    # axis; a last axis of two sensors would cost a loop per step). Per-sensor quantities are
+    # (sensors, 1 or m, 3), their components (sensors, 1 or m); CRF components are (1, m) rows.
     view = {key: array[:, sensors] for key, array in out.items()}
-    com_offset: np.ndarray = constants.com_offset_m[sensors]
-    angular_sf: np.ndarray = constants.angular_scale_factors[sensors]
-    linear_sf: np.ndarray = constants.linear_scale_factors[sensors]
+    com_offset = constants.com_offset_m[sensors][:, None, :]
+    angular_sf = constants.angular_scale_factors[sensors][:, None, :]
+    linear_sf = constants.linear_scale_factors[sensors][:, None, :]
     if hooks:
         grs_id = grs_ids[0]
         offset = constants.com_offset_m[sensors][0]
         for effect in hooks:
             offset = effect.com_offset_m(t_end, grs_id, offset)
-        com_offset = _per_sensor(offset)
+        com_offset = _sensor_major(offset)
     if "com_offset" in view:
-        view["com_offset"][...] = com_offset
+        view["com_offset"][...] = com_offset.transpose(1, 0, 2)
 
-    # CRF components with a sensor axis of one, d with the sensors' axis: products are (m, sensors)
-    rate_dot = [omega_dot[:, None, k] for k in range(3)]
-    rate = [omega_mid[:, None, k] for k in range(3)]
+    rate_dot = [omega_dot[None, :, k] for k in range(3)]
+    rate = [omega_mid[None, :, k] for k in range(3)]
     offset_xyz = [com_offset[..., k] for k in range(3)]
     rotation = _cross_components(rate_dot, offset_xyz)
     centripetal = _cross_components(rate, _cross_components(rate, offset_xyz))
     coupling = [r + c for r, c in zip(rotation, centripetal, strict=True)]
-    total = [a_sc[:, None, k] + coupling[k] for k in range(3)]
-    matrices = constants.crf_to_tmrf[sensors]
-    scratch = np.empty(view["angular_true"].shape[:2])
+    total = [a_sc[None, :, k] + coupling[k] for k in range(3)]
+    matrices = constants.crf_to_tmrf[sensors][:, None]  # (sensors, 1, 3, 3)
+    scratch = np.empty((len(grs_ids), t_end.shape[0]))
     for key, components in (("angular_true", rate_dot), ("linear_maneuver", coupling), ("linear_true", total)):
         target = view[key]
-        apply_matrix_components(matrices, components, [target[..., k] for k in range(3)], scratch)
+        apply_matrix_components(matrices, components, [target[..., k].T for k in range(3)], scratch)
 
     angular_meas, linear_meas = view["angular_meas"], view["linear_meas"]
     angular_meas += view["angular_true"]  # noise + true: the sum true + noise
@@ -129,28 +132,28 @@ def grs_readouts_into(out: dict[str, np.ndarray], tm_noise: np.ndarray, sensors:
     linear_meas += tm_noise
     if hooks:
         angular, linear = angular_meas[:, 0], linear_meas[:, 0]
-        angular_sf_i, linear_sf_i = angular_sf[0], linear_sf[0]
+        angular_sf_i, linear_sf_i = angular_sf[0, 0], linear_sf[0, 0]
         for effect in hooks:
             angular, linear = effect.grs_accelerations(t_end, grs_id, angular, linear)
             angular_sf_i, linear_sf_i = effect.grs_scale_factors(t_end, grs_id, angular_sf_i, linear_sf_i)
         angular_meas[:, 0] = angular
         linear_meas[:, 0] = linear
-        angular_sf, linear_sf = _per_sensor(angular_sf_i), _per_sensor(linear_sf_i)
+        angular_sf, linear_sf = _sensor_major(angular_sf_i), _sensor_major(linear_sf_i)
     if "angular_sf" in view:
-        view["angular_sf"][...] = angular_sf
-        view["linear_sf"][...] = linear_sf
+        view["angular_sf"][...] = angular_sf.transpose(1, 0, 2)
+        view["linear_sf"][...] = linear_sf.transpose(1, 0, 2)
 
     # voltages: noise + 0.5 (sum +- difference) per electrode axis (voltages_from_accelerations)
     voltages = view["voltages"]
     for axis, angle in enumerate(_DIFFERENCE_ANGLE):
-        difference = angular_meas[..., angle] / angular_sf[..., angle]
-        total_v = linear_meas[..., axis] / linear_sf[..., axis]
+        difference = angular_meas[..., angle].T / angular_sf[..., angle]
+        total_v = linear_meas[..., axis].T / linear_sf[..., axis]
         half = np.add(total_v, difference, out=scratch)
         half *= 0.5
-        voltages[..., 2 * axis] += half
+        voltages[..., 2 * axis].T[...] += half
         half = np.subtract(total_v, difference, out=scratch)
         half *= 0.5
-        voltages[..., 2 * axis + 1] += half
+        voltages[..., 2 * axis + 1].T[...] += half
     if hooks:
         result = voltages[:, 0]
         for effect in hooks:
