@@ -150,6 +150,8 @@ class NoiseDraws:
     star_tracker_rad: np.ndarray
 
 
+#: Steps per row in which the white draws are scaled by their standard deviations.
+_SCALE_STEPS = 512
 #: Per-step shape of each white source's draws.
 _SOURCE_SHAPES = {"thruster_torque": (3,), "thruster_force": (3,), "lfs_translational": (2, 3),
                   "lfs_rotational": (2, 3), "tm_environment": (2, 3), "grs_voltage": (2, 6), "star_tracker": (3,)}
@@ -184,6 +186,11 @@ class NoiseStreams:
                 for sensor in config.grs.sensors
             ]),
         }
+        # each source's standard deviations laid out over _SCALE_STEPS steps: the draws are scaled
+        # in rows of that many steps (a per-step pattern of 3 or 6 values broadcast over the draws
+        # would make numpy loop once per step; the products are the same)
+        self._std_rows = {name: np.tile(np.broadcast_to(std, _SOURCE_SHAPES[name]).ravel(), _SCALE_STEPS)
+                          for name, std in self._std.items()}
         self.srp_parameters = srp_ou_parameters(noise.srp, fs)
         # stationary start: the first SRP draw of the stream is the initial state
         self._srp_state = np.zeros(3)
@@ -222,7 +229,13 @@ class NoiseStreams:
             return out
         # drawn in place (the same numbers, in the same order, as a new array of this shape)
         draws = self._rngs[name].standard_normal(shape) if out is None else self._rngs[name].standard_normal(out=out)
-        draws *= self._std[name]  # in place: the same products as std * draws, no second array
+        # in place, the same products as std * draws (no second array), in rows of _SCALE_STEPS steps
+        std_rows = self._std_rows[name]
+        flat = draws.reshape(-1)
+        whole = flat.size - flat.size % std_rows.size
+        rows = flat[:whole].reshape(-1, std_rows.size)
+        rows *= std_rows
+        flat[whole:] *= std_rows[:flat.size - whole]
         return draws
 
     def _srp(self, n: int) -> np.ndarray:
