@@ -173,7 +173,8 @@ def _rows_to_vectors(*rows: np.ndarray) -> tuple[np.ndarray, ...]:
     # one allocation for all of them (see _solve_block_rows)
     out = np.empty((len(rows), rows[0].shape[1], 3))
     for target, source in zip(out, rows, strict=True):
-        np.copyto(target, source.T)
+        for axis in range(3):  # per component: one long loop each, not a loop of three per step
+            target[:, axis] = source[axis]
     return tuple(out)
 
 

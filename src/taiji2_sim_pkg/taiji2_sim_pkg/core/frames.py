@@ -301,7 +301,8 @@ def quat_from_rotvec(rotvec_rad: ArrayLike, out: np.ndarray | None = None) -> np
     scale = np.sin(scaled)
     scale /= scaled
     scale *= 0.5
-    np.multiply(rotvec, scale[..., None], out=out[..., :3])
+    for axis in range(3):  # per component: one long loop each, not a loop of three per vector
+        np.multiply(rotvec[..., axis], scale, out=out[..., axis])
     return out
 
 
@@ -380,7 +381,11 @@ def quat_prefix_product(q: ArrayLike, initial_xyzw: ArrayLike | None = None) -> 
     carry[:, 0, 0] = _IDENTITY_XYZW if initial_xyzw is None else np.asarray(initial_xyzw, dtype=np.float64)
     carry[:, 0, 1:] = quat_prefix_product(inner[:, -1, :-1].T, initial_xyzw).T
     _hamilton_product(carry, inner, rows, np.empty(rows.shape[1:]))
-    return rows.transpose(2, 1, 0).reshape(-1, 4)[:count]
+    out = np.empty((blocks * _SCAN_BLOCK, 4))
+    by_block_out = out.reshape(blocks, _SCAN_BLOCK, 4)
+    for axis in range(4):  # per component: long loops, not one of four per quaternion
+        by_block_out[:, :, axis] = rows[axis].T
+    return out[:count]
 
 
 #: Quaternions per block of :func:`quat_prefix_product` (positions scanned one after the other).
