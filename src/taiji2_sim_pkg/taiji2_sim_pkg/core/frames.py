@@ -22,6 +22,7 @@ __all__ = [
     "crf_to_tmrf",
     "cross",
     "cross_rows",
+    "matrix_pattern",
     "quat_conjugate",
     "quat_from_rotvec",
     "quat_multiply",
@@ -114,8 +115,19 @@ def apply_matrix_rows(matrix: np.ndarray, rows: np.ndarray, out: np.ndarray | No
     return out
 
 
+def matrix_pattern(matrix: ArrayLike) -> tuple[list[list[bool]], list[list[bool]]]:
+    """Which entries of (..., 3, 3) matrices are non-zero in some matrix, and which are one in all.
+
+    The argument ``pattern`` of :func:`apply_matrix_components`, for a matrix applied many times.
+    """
+    matrix = np.asarray(matrix, dtype=np.float64)
+    leading = tuple(range(matrix.ndim - 2))
+    return np.any(matrix != 0.0, axis=leading).tolist(), np.all(matrix == 1.0, axis=leading).tolist()
+
+
 def apply_matrix_components(matrix: ArrayLike, components: Sequence[np.ndarray], out: Sequence[np.ndarray],
-                            scratch: np.ndarray | None = None) -> None:
+                            scratch: np.ndarray | None = None,
+                            pattern: tuple[list[list[bool]], list[list[bool]]] | None = None) -> None:
     """:func:`apply_matrix` on vectors given by their components, written into given arrays.
 
     ``out[i] = (v_x M_i0 + v_y M_i1) + v_z M_i2``, the order of :func:`apply_matrix` (bitwise
@@ -124,13 +136,11 @@ def apply_matrix_components(matrix: ArrayLike, components: Sequence[np.ndarray],
     of an output array) of the broadcast shape, ``scratch`` one more (allocated when needed). An
     entry that is zero in every matrix is skipped (adding ``v 0`` changes no finite sum), an entry
     one in every matrix is a copy (``v 1 = v``): a diagonal inertia costs 3 products instead of 9,
-    a frame rotation about one axis 4.
+    a frame rotation about one axis 4. ``pattern``, :func:`matrix_pattern` of the matrix, saves
+    finding the zero and unit entries again (a streaming step applies the same matrices each time).
     """
     matrix = np.asarray(matrix, dtype=np.float64)
-    leading = tuple(range(matrix.ndim - 2))
-    # the pattern of zero and unit entries, once per call (two reductions, not two per entry)
-    used = np.any(matrix != 0.0, axis=leading).tolist()
-    units = np.all(matrix == 1.0, axis=leading).tolist()
+    used, units = matrix_pattern(matrix) if pattern is None else pattern
     for i, target in enumerate(out):
         first = True
         for j, values in enumerate(components):

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .effects import Effect
-from .frames import apply_matrix_components
+from .frames import apply_matrix_components, matrix_pattern
 
 __all__ = ["GRS_FIELDS", "GrsConstants", "grs_readouts_into"]
 
@@ -54,6 +54,11 @@ class GrsConstants:
     angular_scale_factors: np.ndarray
     linear_scale_factors: np.ndarray
 
+    @property
+    def crf_to_tmrf_pattern(self) -> tuple[list[list[bool]], list[list[bool]]]:
+        """:func:`.frames.matrix_pattern` of all C_i."""
+        return matrix_pattern(self.crf_to_tmrf)
+
 
 def _cross_components(a: Sequence[np.ndarray], b: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
     """``a x b`` by components (the expressions of :func:`.frames.cross`)."""
@@ -70,7 +75,8 @@ def _sensor_major(value: np.ndarray) -> np.ndarray:
 
 def grs_readouts_into(out: dict[str, np.ndarray], tm_noise: np.ndarray, sensors: slice, constants: GrsConstants,
                       t_end: np.ndarray, omega_dot: np.ndarray, omega_mid: np.ndarray, a_sc: np.ndarray,
-                      hooks: Sequence[Effect] = ()) -> None:
+                      hooks: Sequence[Effect] = (),
+                      pattern_of_all: tuple[list[list[bool]], list[list[bool]]] | None = None) -> None:
     """Readouts of the GRS ``sensors`` over a block of m steps, into ``out``.
 
     Parameters
@@ -93,6 +99,9 @@ def grs_readouts_into(out: dict[str, np.ndarray], tm_noise: np.ndarray, sensors:
         acceleration [m s^-2], CRF.
     hooks : sequence of Effect
         Effects (in order); only with a single sensor.
+    pattern_of_all : tuple, optional
+        ``constants.crf_to_tmrf_pattern``, found once by the caller (a streaming step calls this
+        for every sample); used when ``sensors`` are all of them.
     """
     grs_ids = constants.grs_ids[sensors]
     if hooks and len(grs_ids) != 1:
@@ -121,10 +130,11 @@ def grs_readouts_into(out: dict[str, np.ndarray], tm_noise: np.ndarray, sensors:
     coupling = [r + c for r, c in zip(rotation, centripetal, strict=True)]
     total = [a_sc[None, :, k] + coupling[k] for k in range(3)]
     matrices = constants.crf_to_tmrf[sensors][:, None]  # (sensors, 1, 3, 3)
+    pattern = pattern_of_all if len(grs_ids) == len(constants.grs_ids) else None
     scratch = np.empty((len(grs_ids), t_end.shape[0]))
     for key, components in (("angular_true", rate_dot), ("linear_maneuver", coupling), ("linear_true", total)):
         target = view[key]
-        apply_matrix_components(matrices, components, [target[..., k].T for k in range(3)], scratch)
+        apply_matrix_components(matrices, components, [target[..., k].T for k in range(3)], scratch, pattern)
 
     angular_meas, linear_meas = view["angular_meas"], view["linear_meas"]
     angular_meas += view["angular_true"]  # noise + true: the sum true + noise

@@ -222,6 +222,7 @@ class Simulator:
             angular_scale_factors=np.stack([np.asarray(s.angular_scale_factors, dtype=np.float64) for s in sensors]),
             linear_scale_factors=np.stack([np.asarray(s.linear_scale_factors, dtype=np.float64) for s in sensors]),
         )
+        self._crf_to_tmrf_pattern = self._grs_constants.crf_to_tmrf_pattern
         self._st_cov_rad2 = star_tracker_covariance_rad2(config.noise.star_tracker.sigma_rad)
         self._effects = tuple(effects)
         timing = config.timing
@@ -395,7 +396,7 @@ class Simulator:
             for group in groups:
                 grs_readouts_into(block, tm_noise[:size, group], group, self._grs_constants, t_end[window],
                                   attitude.omega_dot_rad_s2[window], attitude.omega_mid_rad_s[window],
-                                  a_sc[window], self._hooks)
+                                  a_sc[window], self._hooks, self._crf_to_tmrf_pattern)
             error = noise.draw_source("star_tracker", size, out=star_tracker_noise[:size])
             quat = star_tracker_measurement(attitude.quat_xyzw[window], error)
             for effect in self._hooks:
