@@ -101,16 +101,18 @@ def calibrate(t_s: ArrayLike, quat_xyzw: ArrayLike, voltages_v: ArrayLike, instr
     if method == "gls":
         sf = ScaleFactorEstimator(instrument, grs_ids, scale_factor_options)  # type: ignore[arg-type]
         g = sf.process_batch(t, quat_xyzw, voltages_v, want_rates=True)
-        rates = np.full((t.size, 3), np.nan)
-        if sf.rates is not None and sf.rate_times is not None:
-            index = np.searchsorted(t, sf.rate_times)
-            index = np.clip(index, 0, t.size - 1)
-            exact = t[index] == sf.rate_times
-            rates[index[exact]] = sf.rates[exact]
         if use_rate_estimate is None:
             use_rate_estimate = bool(NODE_DEFAULTS["com_offset_estimator"]["use_rate_estimate"])
+        rates = None
+        if use_rate_estimate:  # the filtered body rate on the record's stamps (NaN where it has none)
+            rates = np.full((t.size, 3), np.nan)
+            if sf.rates is not None and sf.rate_times is not None:
+                index = np.searchsorted(t, sf.rate_times)
+                index = np.clip(index, 0, t.size - 1)
+                exact = t[index] == sf.rate_times
+                rates[index[exact]] = sf.rates[exact]
         co = ComOffsetEstimator(instrument, grs_ids, com_offset_options)  # type: ignore[arg-type]
-        d = co.process_batch(t, voltages_v, rates if use_rate_estimate else None, g)
+        d = co.process_batch(t, voltages_v, rates, g)
         return CalibrationResult(method, g, d, sf.rates, sf.rate_times)
     if method == "paper":
         psf = PaperScaleFactorFilter(instrument, grs_ids, scale_factor_options)  # type: ignore[arg-type]
