@@ -138,6 +138,12 @@ class ScaleFactorModel:
             out[tuple(present)] = diag
         return out
 
+    def input_noise(self, present: Sequence[int]) -> np.ndarray:
+        """(3, 3) model-coordinate covariance of the readout noise in the angular acceleration of a step
+        with the GRS ``present`` (not empty; fused when all are present) [model units]."""
+        q_crf = self.q_fused if len(present) == len(self.grs_ids) else self.q_grs[present[0]]
+        return self.to_model @ q_crf @ self.to_model.T
+
     def process_noise_model(self, present: Sequence[int], gap_sigma: float) -> np.ndarray:
         """(6, 6) model-coordinate process noise of a step with only the GRS ``present``."""
         if len(present) == len(self.grs_ids):
