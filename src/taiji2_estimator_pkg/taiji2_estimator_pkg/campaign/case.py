@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import time
 import traceback
 from collections.abc import Mapping
@@ -52,7 +53,7 @@ def run_case(case: Mapping[str, Any]) -> dict[str, Any]:
         one row per method and parameter (G relative to truth is left to the summary: rows are SI).
         ``compute_s`` is the case's wall time, ``cpu_s`` the CPU time of its whole process over the
         case (in a Dask worker the worker's own threads included; on a busy machine the fairer
-        measure of what a case costs).
+        measure of what a case costs). ``worker_pid`` is the process that ran it.
     """
     started = time.perf_counter()
     cpu_started = time.process_time()
@@ -67,7 +68,7 @@ def run_case(case: Mapping[str, Any]) -> dict[str, Any]:
     for row in rows:
         row["compute_s"] = compute_s
     return {"case_hash": case["case_hash"], "status": status, "error": error, "compute_s": compute_s,
-            "cpu_s": cpu_s, "rows": rows}
+            "cpu_s": cpu_s, "worker_pid": os.getpid(), "rows": rows}
 
 
 def _rows(case: Mapping[str, Any]) -> list[dict[str, Any]]:
