@@ -56,14 +56,17 @@ def test_workers_have_no_trim_threshold_and_the_callers_environment_is_kept(tmp_
         def probe(dask_worker):
             return (os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("OPENBLAS_NUM_THREADS"),
                     getattr(dask_worker, "taiji2_allocator_restored", "missing"),
-                    getattr(dask_worker, "taiji2_blas_threads", "missing"))
+                    getattr(dask_worker, "taiji2_blas_threads", "missing"),
+                    any(pc.is_running() for name, pc in dask_worker.periodic_callbacks.items()
+                        if name.startswith("profile")))
 
         seen.append(get_client().run(probe))
 
     before = dict(os.environ)
     run = run_campaign(spec, tmp_path, workers=2, progress=None, on_result=inspect)
     assert run.completed == 2
-    assert sorted(seen[0].values()) == [(None, "1", False, 1)] * 2  # nothing left to restore; one BLAS thread
+    # nothing left to restore; one BLAS thread; no sampling profiler
+    assert sorted(seen[0].values()) == [(None, "1", False, 1, False)] * 2
     assert dict(os.environ) == before
 
 
@@ -83,3 +86,26 @@ if __name__ == "__main__":
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stderr.strip() == ""
+
+
+def test_the_setup_stops_the_profiler_of_a_worker_started_with_dasks_defaults():
+    # a worker of an existing cluster (`dask worker`) runs the sampling profiler's callbacks
+    from tornado.ioloop import PeriodicCallback
+
+    from taiji2_estimator_pkg.campaign.worker import stop_profiler
+
+    class Worker:
+        def __init__(self) -> None:
+            self.periodic_callbacks = {name: PeriodicCallback(lambda: None, 10)
+                                       for name in ("profile", "profile-cycle", "heartbeat")}
+
+    worker = Worker()
+    for callback in worker.periodic_callbacks.values():
+        callback.start()
+    try:
+        assert stop_profiler(worker) is True
+        running = {name: pc.is_running() for name, pc in worker.periodic_callbacks.items()}
+        assert running == {"profile": False, "profile-cycle": False, "heartbeat": True}
+    finally:
+        worker.periodic_callbacks["heartbeat"].stop()
+    assert stop_profiler(type("Bare", (), {"periodic_callbacks": {}})()) is False

@@ -175,7 +175,9 @@ def _local_cluster(workers: int) -> Any:
     from dask.distributed import LocalCluster
 
     pre_spawn = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_PRE_SPAWN_ENV}
-    with dask.config.set({"distributed.nanny.pre-spawn-environ": pre_spawn}):
+    # no sampling profiler in the workers (see .worker.CampaignWorkerSetup: it costs a case 10-17 %)
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": pre_spawn,
+                          "distributed.worker.profile.enabled": False}):
         # the HTTP server (dashboard with bokeh, /health and metrics without) on a free port: the
         # default 8787 warns when another cluster holds it
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",

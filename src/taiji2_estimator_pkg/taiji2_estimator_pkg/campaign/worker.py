@@ -71,10 +71,28 @@ class _HeartbeatRaceFilter(logging.Filter):
         return not str(record.msg).startswith(HEARTBEAT_FAILURE)
 
 
+#: The worker's periodic callbacks of Dask's sampling profiler: every 10 ms (``distributed.worker.
+#: profile.interval``) the event-loop thread takes the GIL to walk the task thread's stack, and the
+#: case's thread waits for it back; a warm 3-h case cost 1.14x wall and 1.17x CPU of the same case in
+#: a plain process with it and 0.98x, 1.00x without (bench_campaign --ablation no-profiler, 18 cases,
+#: 2026-11-26). Campaign workers do not run it; the dashboard's profile page stays empty.
+PROFILER_CALLBACKS = ("profile", "profile-cycle")
+
+
+def stop_profiler(worker: Any) -> bool:
+    """Stop the worker's sampling profiler; True if it was running."""
+    callbacks = getattr(worker, "periodic_callbacks", {})
+    running = [callbacks[name] for name in PROFILER_CALLBACKS if name in callbacks]
+    for callback in running:
+        callback.stop()
+    return bool(running)
+
+
 class CampaignWorkerSetup(WorkerPlugin):
     """Worker plugin for campaign workers (also restarted ones).
 
-    ``setup``: :func:`restore_allocator_thresholds`. ``teardown`` (the first step of the worker's
+    ``setup``: :func:`restore_allocator_thresholds` and :func:`stop_profiler` (a worker of an
+    existing cluster started with Dask's defaults runs the profiler). ``teardown`` (the first step of the worker's
     ``close``, before it closes its RPC pool): no new heartbeat, and the one that may still be in
     flight fails without a traceback on stderr (see :data:`HEARTBEAT_FAILURE`).
     """
@@ -87,6 +105,7 @@ class CampaignWorkerSetup(WorkerPlugin):
         from taiji2_runtime.threads import limit_blas_threads
 
         worker.taiji2_allocator_restored = restore_allocator_thresholds()
+        worker.taiji2_profiler_stopped = stop_profiler(worker)
         # the project's BLAS policy (docs/threads.md), also on a cluster whose workers did not start
         # with one BLAS thread (Dask's LocalCluster defaults do; `dask worker` on a host does not)
         worker.taiji2_blas_threads = limit_blas_threads()
