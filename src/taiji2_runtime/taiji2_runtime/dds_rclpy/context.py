@@ -25,6 +25,7 @@ from taiji2_runtime.cyclonedds_config import DEFAULT_CYCLONEDDS_CONFIG, MAX_PART
 
 from .arguments import RosArguments, parse_ros_args
 from .exceptions import DdsUnavailableError, NotInitializedException
+from .topics import create_topic
 
 #: Shutdown reason prefix when a node turned out to duplicate another node's name.
 DUPLICATE_NODE_NAME = "duplicate node name"
@@ -200,7 +201,7 @@ class Context:
                         f"not {dds_type.__name__}"
                     )
                 return topic
-            topic = Topic(self.participant(), dds_name, dds_type)
+            topic = create_topic(self.participant(), dds_name, dds_type)
             self._topics[dds_name] = (topic, dds_type)
             return topic
 
@@ -287,10 +288,11 @@ def forget_deleted_entities() -> None:
     participant: readers, writers, read conditions, topics).
 
     cyclonedds-python's ``Entity.__del__`` deletes the handle it holds if that handle is still in its
-    registry. Cyclone DDS reuses handle values, so a stale reader object finalized later (by the
-    garbage collector, at any allocation) could delete a *new* entity that got its old handle: a
-    topic created a moment later then crashed the process (a segmentation fault in ``Topic()`` once
-    in the suite). Forgotten, their finalizers do nothing.
+    registry. A stale reader object finalized later (by the garbage collector, at any allocation)
+    would call ``dds_delete`` on a handle that is gone; forgotten, their finalizers do nothing.
+    (Cyclone draws handles at random from 2**31 values, so that call deleting a *new* entity is
+    improbable; the segmentation fault in ``Topic()`` once blamed on it was a race in cyclonedds'
+    type library, see :mod:`.topics`.)
     """
     from cyclonedds.core import Entity
 

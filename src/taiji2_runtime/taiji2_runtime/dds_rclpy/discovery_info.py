@@ -33,7 +33,8 @@ from cyclonedds.core import Policy, Qos
 from cyclonedds.idl import IdlStruct
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
-from cyclonedds.topic import Topic
+
+from .topics import create_topic
 
 DISCOVERY_TOPIC = "ros_discovery_info"
 START_KEY = "taiji2_start_ns"
@@ -124,7 +125,7 @@ class DiscoveryInfo:
         self._participant = participant
         self._guid = participant.get_guid().bytes
         self._start_ns = start_ns
-        self._topic = Topic(participant, DISCOVERY_TOPIC, self._participant_info)
+        self._topic = create_topic(participant, DISCOVERY_TOPIC, self._participant_info)
         # keep-last 1 per writer (as rmw_cyclonedds_cpp); the topic is keyless, so the reader keeps
         # every sample until taken, or one participant's update would overwrite another's
         self._writer = DataWriter(participant, self._topic, _qos(Policy.History.KeepLast(1)))
