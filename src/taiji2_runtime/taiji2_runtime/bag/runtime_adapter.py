@@ -5,7 +5,7 @@ Everything else in the recorder and player is plain rclpy API through :mod:`taij
 =====================  =====================================  ======================================
 need                   rclpy                                   embedded runtime (Cyclone DDS)
 =====================  =====================================  ======================================
-raw bytes on receive   ``create_subscription(..., raw=True)``  message object -> ``msg.serialize()``
+raw bytes on receive   ``create_subscription(..., raw=True)``  the same (the reader's sample bytes)
 publish raw bytes      ``publisher.publish(bytes)``            sample whose ``serialize()`` returns
                                                                the bytes (no decode / re-encode)
 publishers' QoS        ``get_publishers_info_by_topic``        DDS built-in publication topic
@@ -38,8 +38,9 @@ def message_class(msgtype: str) -> type | None:
 
 
 def raw_subscription_kwargs() -> dict[str, Any]:
-    """Keyword arguments of ``create_subscription`` that deliver serialised bytes where supported."""
-    return {"raw": True} if RUNTIME == "rclpy" else {}
+    """Keyword arguments of ``create_subscription`` that deliver serialised bytes (both runtimes support them:
+    a recorder stores what it received without deserialising and serialising it again)."""
+    return {"raw": True}
 
 
 def serialize(msg: Any) -> bytes:

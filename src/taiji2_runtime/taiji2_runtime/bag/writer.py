@@ -26,6 +26,7 @@ files of the bag in their own right, and messages are counted as dropped until a
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shutil
@@ -35,10 +36,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import rosbags.rosbag2.writer
 import yaml
-from rosbags.interfaces import Connection, Qos
+from rosbags.interfaces import Connection, ConnectionExtRosbag2, Qos
 from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.rosbag2.metadata import dump_qos_v8
+from rosbags.rosbag2.enums import CompressionMode
+from rosbags.rosbag2.metadata import dump_qos_v8 as _rosbags_dump_qos_v8
 from rosbags.typesys.store import Typestore
 
 from .errors import BagError
@@ -84,6 +87,23 @@ def definition_and_hash(store: Typestore, msgtype: str) -> tuple[str, str]:
     raise DefinitionUnavailable(f"no definition of {msgtype} with the graph's type hash {wire}")
 
 
+@functools.lru_cache(maxsize=1024)
+def _dumped_qos(profiles: tuple[Qos, ...]) -> str:
+    return _rosbags_dump_qos_v8(list(profiles))
+
+
+def dump_qos_v8(qos: list[Qos]) -> str:
+    """rosbags' ``dump_qos_v8`` (the YAML text of a topic's offered QoS profiles), computed once per profile list.
+
+    Every journal file (2 a second) re-adds each topic and writes its own metadata, and rosbags renders each
+    topic's QoS list as YAML with ruamel every time: ~3 ms a topic, which made the bag rotation most of the
+    recorder's CPU (cProfile of ``taiji2 bag record`` in ``taiji2 experiment --link deep_space``). The text
+    depends only on the (immutable) profiles, so rosbags' writer gets this memoised function as well."""
+    return _dumped_qos(tuple(qos))
+
+
+rosbags.rosbag2.writer.dump_qos_v8 = dump_qos_v8  # Writer.add_connection / Writer.close look it up there
+
 STORAGES = {"mcap": (StoragePlugin.MCAP, ".mcap"), "sqlite3": (StoragePlugin.SQLITE3, ".db3")}
 _VERSION = 8
 #: what a full disk, a file-size limit or an I/O error raises from the storage plugins
@@ -112,15 +132,54 @@ class FileStats:
     per_topic: dict[int, int] = field(default_factory=dict)
 
 
-class _StorageFile:
-    """One rosbags :class:`Writer` in ``.incoming/<name>/`` whose file moves into the bag on close."""
+class _JournalWriter(Writer):
+    """rosbags' :class:`Writer` whose ``close`` renders the file's metadata as JSON (a YAML subset), not with ruamel.
 
-    def __init__(self, bag: Path, name: str, storage: str, topics: list[_Topic]) -> None:
+    rosbags renders it twice per file (the storage file's embedded copy and the work directory's
+    ``metadata.yaml``, which is discarded here): for a journal, closed twice a second, that was most of what
+    was left of the recorder's CPU for the rotation. The same content (rosbags 0.11's ``Writer.close``, no
+    compression: the bag writer never sets it); segment files keep rosbags' own ``close``."""
+
+    def close(self) -> None:
+        storage = self.storage
+        if storage is None or self.compression_mode != CompressionMode.NONE:
+            super().close()
+            return
+        count = sum(self.counts.values())
+        timing = {"starting_time": {"nanoseconds_since_epoch": self.min_timestamp},
+                  "duration": {"nanoseconds": max(0, self.max_timestamp - self.min_timestamp)}}
+        info = {
+            "version": self.version, "storage_identifier": self.storage_plugin.name.lower(),
+            "relative_file_paths": [storage.path.name], "duration": timing["duration"],
+            "starting_time": timing["starting_time"], "message_count": count,
+            "topics_with_message_count": [
+                {"topic_metadata": {"name": c.topic, "type": c.msgtype,
+                                    "serialization_format": c.ext.serialization_format,
+                                    "offered_qos_profiles": dump_qos_v8(c.ext.offered_qos_profiles),
+                                    "type_description_hash": c.digest},
+                 "message_count": self.counts[c.id]}
+                for c in self.connections if isinstance(c.ext, ConnectionExtRosbag2)],
+            "compression_format": "", "compression_mode": "",
+            "files": [{"path": storage.path.name, **timing, "message_count": count}],
+            "custom_data": self.custom_data or None, "ros_distro": "rosbags",
+        }
+        storage.close(self.version, json.dumps(info))
+        self.storage = None
+        temporary = self.metapath.with_suffix(".yaml.tmp")
+        temporary.write_text(json.dumps({"rosbag2_bagfile_information": info}), "utf8")
+        temporary.replace(self.metapath)
+
+
+class _StorageFile:
+    """One rosbags :class:`Writer` in ``.incoming/<name>/`` whose file moves into the bag on close (a journal's:
+    :class:`_JournalWriter`)."""
+
+    def __init__(self, bag: Path, name: str, storage: str, topics: list[_Topic], journal: bool = False) -> None:
         plugin, self._suffix = STORAGES[storage]
         self._bag = bag
         self._work = bag / _INCOMING / name
         self.stats = FileStats(name + self._suffix)
-        self._writer = Writer(self._work, version=_VERSION, storage_plugin=plugin)
+        self._writer = (_JournalWriter if journal else Writer)(self._work, version=_VERSION, storage_plugin=plugin)
         self._writer.open()
         self._connections: dict[int, Connection] = {}
         for topic in topics:
@@ -281,7 +340,7 @@ class BagWriter:
                 self._segment_opened = now
             if self._journal is None:
                 name = f"{self.path.name}_{self._segment_index}_part{self._journal_index}"
-                self._journal = _StorageFile(self.path, name, self.storage, self._topics)
+                self._journal = _StorageFile(self.path, name, self.storage, self._topics, journal=True)
                 self._journal_index += 1
                 self._journal_opened = now
             self._segment.write(handle, stamp_ns, data)

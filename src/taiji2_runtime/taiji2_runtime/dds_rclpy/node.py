@@ -200,14 +200,17 @@ class Node(ParameterMixin):
         topic: str,
         callback: Callable[[Any], Any],
         qos_profile: QoSProfile | int,
+        *,
+        raw: bool = False,
         **_ignored: Any,
     ) -> Subscription:
-        """Create a subscription delivering ``msg_type`` messages of ``topic`` to ``callback``."""
+        """Create a subscription delivering ``msg_type`` messages of ``topic`` to ``callback`` (with ``raw``:
+        their CDR bytes, as rclpy's ``raw=True``)."""
         profile = coerce_qos(qos_profile)
         fqn = self.resolve_topic_name(topic)
         dds_topic = self._context.topic(_dds_topic(fqn), msg_type)
         reader = DataReader(self._context.participant(), dds_topic, to_dds_qos(profile, type_hash(msg_type)))
-        subscription = Subscription(reader, msg_type, fqn, callback, profile)
+        subscription = Subscription(reader, msg_type, fqn, callback, profile, raw=raw)
         self._subscriptions.append(subscription)
         self._context.entities_changed()
         return subscription
