@@ -28,6 +28,10 @@ from .validation import InputValidator, ValidationOptions, validate_batch
 #: against 1e-9 rad s^-2 of gap_acceleration_sigma_rad_s2) start a new segment and the changes between
 #: samples of one torque (chi-square at most 2.5 over 18,000 pairs, lags 0.1-10 s) do not
 HELD_INPUT_FALSE_ALARM = 1e-2
+#: 1-sigma of the attitude and rate that a torque switch at an unknown time inside a gap leaves unexplained,
+#: in units of their largest possible value: effectively diffuse along those two directions (only they
+#: lose their information, not the whole state as in a new segment), finite for the covariance form
+SWITCH_IN_GAP_SIGMA_SCALE = 100.0
 
 
 class ScaleFactorEstimator:
@@ -212,27 +216,38 @@ class ScaleFactorEstimator:
         return regressor, self.model.process_noise_model(present, self.options.gap_acceleration_sigma_rad_s2) + gap, \
             present
 
-    def _held_input_continues(self, following: tuple[Mapping[int, np.ndarray], tuple[int, ...]]) -> bool:
-        """Whether the GRS input of the epoch after a gap, ``following`` = (differences, GRS present), is
-        the held one within the readout noise and ``gap_acceleration_sigma_rad_s2`` (chi-square test at
-        :data:`HELD_INPUT_FALSE_ALARM`, accelerations at the nominal scale factors).
+    def _switch_in_gap(self, missing: int, following: tuple[Mapping[int, np.ndarray], tuple[int, ...]]
+                       ) -> np.ndarray | None:
+        """Extra (6, 6) process noise at the end of a gap of ``missing`` epochs whose next epoch has the GRS
+        input ``following`` = (differences, GRS present): None where the held input bridges the gap;
+        NaN where no input after the gap tells (the caller starts a new segment).
 
-        The held input is right across a gap only while the acceleration stands still: a torque switch
+        The held input is right across a gap only while the acceleration stands still. A torque switch
         inside the gap leaves the held (old) acceleration in the prediction for the rest of the gap, and
-        G absorbs the attitude and rate that it misses. One switch in a 0.2-s gap moved G by 0.6 sigma,
-        in a 1-s gap by 2 sigma (Type-1, 600 s, seed 4; test/estimator/test_restart_exact.py). A gap whose
-        end the held input does not explain (or without GRS data to tell) starts a new segment instead.
-        Before any GRS sample nothing is held and nothing can go stale."""
+        G absorbed the attitude and rate that it missed: one switch in a 0.2-s gap moved G by 0.6 sigma, in
+        a 1-s gap by 2 sigma, in 9.9 s by 2.6 sigma (Type-1, 600 s, seed 4; test/estimator/
+        test_restart_exact.py). So the input after the gap is tested against the held one (chi-square at
+        :data:`HELD_INPUT_FALSE_ALARM` under the readout noise and ``gap_acceleration_sigma_rad_s2``,
+        accelerations at the nominal G). Where it changed by ``d``, the switch at an unknown step leaves
+        the state after the gap off by ``(beta^2 / 2) d`` in attitude and ``beta d`` in rate, ``beta`` in
+        [0, gap] [s]: those two directions get a (nearly) diffuse variance (:data:`SWITCH_IN_GAP_SIGMA_SCALE`
+        times their range), and the rest of the state keeps its information. Before any GRS sample nothing
+        is held and nothing can go stale."""
         if self._held is None:
-            return True
+            return None
         diffs, present = following
         if not present:
-            return False
+            return np.full((6, 6), np.nan)
         held, held_present = self._held
         change = (self.model.input_regressor(diffs, present) - held) @ self.nominal_g
         noise = self.model.input_noise(present) + self.model.input_noise(held_present) \
             + self.options.gap_acceleration_sigma_rad_s2**2 * (self.model.to_model @ self.model.to_model.T)
-        return float(change @ np.linalg.solve(noise, change)) <= self.held_input_gate
+        if float(change @ np.linalg.solve(noise, change)) <= self.held_input_gate:
+            return None
+        span_s = missing * self.instrument.dt_s
+        attitude = np.concatenate((change, np.zeros(3))) * (SWITCH_IN_GAP_SIGMA_SCALE * 0.5 * span_s**2)
+        rate = np.concatenate((np.zeros(3), change)) * (SWITCH_IN_GAP_SIGMA_SCALE * span_s)
+        return np.outer(attitude, attitude) + np.outer(rate, rate)
 
     def _epoch_input(self, epochs: EpochArrays, k: int) -> tuple[dict[int, np.ndarray], tuple[int, ...]]:
         """(differences, GRS with a valid sample) of epoch ``k`` of a batch (as :meth:`update` sees them)."""
@@ -244,22 +259,26 @@ class ScaleFactorEstimator:
         """Advance over ``missing`` epochs without any data (the last GRS input held, see
         :meth:`_held_input`) up to the epoch whose input is ``following`` (see
         :meth:`_held_input_continues`); ``g``: in an evaluation pass, the scale factors the held input is
-        applied with. A gap longer than ``max_bridged_gap_s``, or one the held input does not bridge,
-        starts a new segment."""
+        applied with. A gap longer than ``max_bridged_gap_s``, or one across a switch with no GRS input
+        after it, starts a new segment."""
         if missing <= 0:
             return
-        if missing * self.instrument.dt_s > self.options.max_bridged_gap_s \
-                or not self._held_input_continues(following):
+        switch = None
+        if missing * self.instrument.dt_s <= self.options.max_bridged_gap_s:
+            switch = self._switch_in_gap(missing, following)
+        if missing * self.instrument.dt_s > self.options.max_bridged_gap_s or \
+                (switch is not None and not np.all(np.isfinite(switch))):
             self.filter.reset_segment()
             self._cache = None
             return
         regressor, q_step, present = self._held_input()
-        for _ in range(missing):
+        for step in range(missing):
+            q = q_step if switch is None or step < missing - 1 else q_step + switch
             if g is not None:
-                self.filter.step(None, None, None if regressor is None else regressor @ g, None, q=q_step)
+                self.filter.step(None, None, None if regressor is None else regressor @ g, None, q=q)
                 continue
             fresh = self.filter.fresh
-            self.filter.step(None, None, None, regressor, q=q_step)
+            self.filter.step(None, None, None, regressor, q=q)
             if present and not fresh:
                 self.st_correction_sum += self.st_correction[present]
 
