@@ -45,15 +45,12 @@ class LinkMonitor:
                                         reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
         latched = rclpy.qos.QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL,
                                        reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
-        # the truth comes with every 10-Hz step and only its last value is reported: the reader keeps the
-        # latest (reliable: the last one published is delivered), not 40 messages per simulated second
-        latest_only = rclpy.qos.QoSProfile(depth=1, reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
         self.latest: dict[str, Any] = {}
         self.history: dict[str, list[tuple[int, list[float], list[float]]]] = {}
         for grs in (1, 2):
             for kind, cls in (("scale_factors", t.ScaleFactorEstimate), ("com_offset", t.ComOffsetEstimate)):
                 self._watch(node, cls, f"/taiji2/estimates/grs{grs}/{kind}", keep_all, record=True)
-                self._watch(node, cls, f"/taiji2/sim/grs{grs}/{kind}", latest_only)
+                self._watch(node, cls, f"/taiji2/sim/grs{grs}/{kind}", keep_all)
         self._watch(node, t.ComOffsetEstimate, "/taiji2/estimates/com_offset_difference", keep_all)
         self.reception: list[dict[str, Any]] = []
         self.link_report: dict[str, Any] | None = None
