@@ -206,8 +206,9 @@ class ScaleFactorEstimator:
         ``gap_acceleration_sigma_rad_s2`` for the change (a torque switch). Taking the unknown
         acceleration as zero-mean noise (sigma 1e-8) instead biased G by 8-11 sigma over 1200 s with
         5 % of the epochs lost at random, and a diffuse one leaves G undetermined; held, G is
-        unbiased within the Monte Carlo's resolution (20 seeds), also with every torque switch lost,
-        for 11 % more sigma. Before any GRS sample: no input, that sigma alone.
+        unbiased within the Monte Carlo's resolution (20 seeds), for 11 % more sigma. A torque switch
+        inside a gap is the exception (:meth:`_switch_in_gap`). Before any GRS sample: no input, that
+        sigma alone.
         """
         gap = self.model.process_noise_model((), self.options.gap_acceleration_sigma_rad_s2)
         if self._held is None:
