@@ -18,9 +18,12 @@ pytestmark = pytest.mark.embedded_runtime(reason=(
     "a race inside cyclonedds-python, which the embedded runtime works around; rclpy does not use it"
 ))
 
-#: contexts created and shut down back to back. Before the fix, 3 of 4 runs of 400 died (2 by
-#: SIGSEGV, 1 by BAD_PARAMETER) on an idle 2-core machine; each takes 4-6 s there
-CHURN_CONTEXTS = 400
+#: contexts each churn process creates and shuts down back to back, and churn processes run at once
+#: (competing for the CPUs, they delay each other's Cyclone garbage collector into the next
+#: context's Topic() calls). Before the fix, 4 of 6 such runs had a process die (3 by SIGSEGV, 1 by
+#: BAD_PARAMETER) on an otherwise idle 2-core machine, 0 of 6 after; a run takes about 9 s there
+CHURN_CONTEXTS = 600
+CHURN_PROCESSES = 2
 
 CHURN = f"""
 import faulthandler
@@ -36,10 +39,18 @@ print("churned")
 
 
 def test_contexts_created_and_shut_down_back_to_back_never_crash_topic_creation():
-    proc = subprocess.run([PYTHON, "-c", CHURN], env=python_subprocess_env(), capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, f"exit {proc.returncode}:\n{proc.stderr[-3000:]}"
-    assert proc.stdout.strip() == "churned"
+    procs = [subprocess.Popen([PYTHON, "-c", CHURN], env=python_subprocess_env(), stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(CHURN_PROCESSES)]
+    try:
+        for proc in procs:
+            out, err = proc.communicate(timeout=300)
+            assert proc.returncode == 0, f"exit {proc.returncode}:\n{err[-3000:]}"
+            assert out.strip() == "churned"
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
 
 
 def test_topic_types_stay_anchored_after_their_context_shuts_down():
