@@ -58,15 +58,16 @@ def test_workers_have_no_trim_threshold_and_the_callers_environment_is_kept(tmp_
                     getattr(dask_worker, "taiji2_allocator_restored", "missing"),
                     getattr(dask_worker, "taiji2_blas_threads", "missing"),
                     any(pc.is_running() for name, pc in dask_worker.periodic_callbacks.items()
-                        if name.startswith("profile")))
+                        if name.startswith("profile")),
+                    dask_worker.periodic_callbacks["tick"].callback_time)
 
         seen.append(get_client().run(probe))
 
     before = dict(os.environ)
     run = run_campaign(spec, tmp_path, workers=2, progress=None, on_result=inspect)
     assert run.completed == 2
-    # nothing left to restore; one BLAS thread; no sampling profiler
-    assert sorted(seen[0].values()) == [(None, "1", False, 1, False)] * 2
+    # nothing left to restore; one BLAS thread; no sampling profiler; a 1-s health tick
+    assert sorted(seen[0].values()) == [(None, "1", False, 1, False, 1000.0)] * 2
     assert dict(os.environ) == before
 
 
@@ -88,24 +89,27 @@ if __name__ == "__main__":
     assert out.stderr.strip() == ""
 
 
-def test_the_setup_stops_the_profiler_of_a_worker_started_with_dasks_defaults():
-    # a worker of an existing cluster (`dask worker`) runs the sampling profiler's callbacks
+def test_the_setup_quiets_the_event_loop_of_a_worker_started_with_dasks_defaults():
+    # a worker of an existing cluster (`dask worker`) runs the sampling profiler and a 20-ms tick
     from tornado.ioloop import PeriodicCallback
 
-    from taiji2_estimator_pkg.campaign.worker import stop_profiler
+    from taiji2_estimator_pkg.campaign.worker import quiet_event_loop
 
     class Worker:
         def __init__(self) -> None:
             self.periodic_callbacks = {name: PeriodicCallback(lambda: None, 10)
-                                       for name in ("profile", "profile-cycle", "heartbeat")}
+                                       for name in ("profile", "profile-cycle", "heartbeat", "tick")}
 
     worker = Worker()
     for callback in worker.periodic_callbacks.values():
         callback.start()
     try:
-        assert stop_profiler(worker) is True
+        assert quiet_event_loop(worker) is True
         running = {name: pc.is_running() for name, pc in worker.periodic_callbacks.items()}
-        assert running == {"profile": False, "profile-cycle": False, "heartbeat": True}
+        assert running == {"profile": False, "profile-cycle": False, "heartbeat": True, "tick": True}
+        assert worker.periodic_callbacks["tick"].callback_time == 1000.0
+        assert worker.periodic_callbacks["heartbeat"].callback_time == 10
     finally:
         worker.periodic_callbacks["heartbeat"].stop()
-    assert stop_profiler(type("Bare", (), {"periodic_callbacks": {}})()) is False
+        worker.periodic_callbacks["tick"].stop()
+    assert quiet_event_loop(type("Bare", (), {"periodic_callbacks": {}})()) is False

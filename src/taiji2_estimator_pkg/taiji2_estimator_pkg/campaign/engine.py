@@ -174,10 +174,14 @@ def _local_cluster(workers: int) -> Any:
     import dask
     from dask.distributed import LocalCluster
 
+    from .worker import TICK_INTERVAL_S
+
     pre_spawn = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_PRE_SPAWN_ENV}
-    # no sampling profiler in the workers (see .worker.CampaignWorkerSetup: it costs a case 10-17 %)
+    # no sampling profiler and a slow health tick in the workers: each wake-up of a worker's event
+    # loop takes the GIL from its case (.worker.quiet_event_loop: 10-17 % and 9-16 % of a case)
     with dask.config.set({"distributed.nanny.pre-spawn-environ": pre_spawn,
-                          "distributed.worker.profile.enabled": False}):
+                          "distributed.worker.profile.enabled": False,
+                          "distributed.admin.tick.interval": f"{TICK_INTERVAL_S}s"}):
         # the HTTP server (dashboard with bokeh, /health and metrics without) on a free port: the
         # default 8787 warns when another cluster holds it
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",

@@ -77,24 +77,40 @@ class _HeartbeatRaceFilter(logging.Filter):
 #: a plain process with it and 0.98x, 1.00x without (bench_campaign --ablation no-profiler, 18 cases,
 #: 2026-11-26). Campaign workers do not run it; the dashboard's profile page stays empty.
 PROFILER_CALLBACKS = ("profile", "profile-cycle")
+#: The period of the event loop's health tick in a campaign worker [s] (Dask's default 20 ms,
+#: ``distributed.admin.tick.interval``): 50 wake-ups a second, each taking the GIL from the case's
+#: thread; with every core busy (2 workers on 2 cores) a warm case cost 1.09-1.16x the plain pool's
+#: with it and 0.97x at 1 s (bench_campaign, 16 cases each, 2026-11-26). The tick only watches the
+#: loop (a warning when a tick is more than ``distributed.admin.tick.limit``, 3 s, late).
+TICK_INTERVAL_S = 1.0
 
 
-def stop_profiler(worker: Any) -> bool:
-    """Stop the worker's sampling profiler; True if it was running."""
+def quiet_event_loop(worker: Any) -> bool:
+    """Stop the worker's sampling profiler and slow its health tick to :data:`TICK_INTERVAL_S`.
+
+    Returns
+    -------
+    bool
+        True if the profiler was running (a worker of an existing cluster started with Dask's
+        defaults); the embedded LocalCluster starts its workers without it.
+    """
     callbacks = getattr(worker, "periodic_callbacks", {})
     running = [callbacks[name] for name in PROFILER_CALLBACKS if name in callbacks]
     for callback in running:
         callback.stop()
+    if "tick" in callbacks:
+        # tornado's PeriodicCallback reads callback_time [ms] when it schedules its next run
+        callbacks["tick"].callback_time = max(callbacks["tick"].callback_time, TICK_INTERVAL_S * 1000)
     return bool(running)
 
 
 class CampaignWorkerSetup(WorkerPlugin):
     """Worker plugin for campaign workers (also restarted ones).
 
-    ``setup``: :func:`restore_allocator_thresholds` and :func:`stop_profiler` (a worker of an
-    existing cluster started with Dask's defaults runs the profiler). ``teardown`` (the first step of the worker's
-    ``close``, before it closes its RPC pool): no new heartbeat, and the one that may still be in
-    flight fails without a traceback on stderr (see :data:`HEARTBEAT_FAILURE`).
+    ``setup``: :func:`restore_allocator_thresholds` and :func:`quiet_event_loop` (a worker of an
+    existing cluster started with Dask's defaults runs the profiler and a 20-ms tick). ``teardown``
+    (the first step of the worker's ``close``, before it closes its RPC pool): no new heartbeat,
+    and the one that may still be in flight fails without a traceback on stderr (see :data:`HEARTBEAT_FAILURE`).
     """
 
     name = "taiji2-campaign-worker-setup"
@@ -105,7 +121,7 @@ class CampaignWorkerSetup(WorkerPlugin):
         from taiji2_runtime.threads import limit_blas_threads
 
         worker.taiji2_allocator_restored = restore_allocator_thresholds()
-        worker.taiji2_profiler_stopped = stop_profiler(worker)
+        worker.taiji2_profiler_stopped = quiet_event_loop(worker)
         # the project's BLAS policy (docs/threads.md), also on a cluster whose workers did not start
         # with one BLAS thread (Dask's LocalCluster defaults do; `dask worker` on a host does not)
         worker.taiji2_blas_threads = limit_blas_threads()
