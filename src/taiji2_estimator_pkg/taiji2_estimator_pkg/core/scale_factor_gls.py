@@ -25,8 +25,8 @@ from .validation import InputValidator, ValidationOptions, validate_batch
 #: false-alarm probability (per gap, under the held-input model) of the test that the input after a gap
 #: still is the held one: a needless new segment costs precision, a missed torque switch biases G. At 1e-2
 #: (chi-square 11.3, 3 dof) the Type-1 switches (5.5e-9 rad s^-2 on x or y, 1.1e-8 on z: chi-square 17-120
-#: against 1e-9 rad s^-2 of gap_acceleration_sigma_rad_s2) start a new segment and the changes between
-#: samples of one torque (chi-square at most 2.5 over 18,000 pairs, lags 0.1-10 s) do not
+#: against 1e-9 rad s^-2 of gap_acceleration_sigma_rad_s2) are detected (see _switch_in_gap) and the
+#: changes between samples of one torque (chi-square at most 2.5 over 18,000 pairs, lags 0.1-10 s) are not
 HELD_INPUT_FALSE_ALARM = 1e-2
 #: 1-sigma of the attitude and rate that a torque switch at an unknown time inside a gap leaves unexplained,
 #: in units of their largest possible value: effectively diffuse along those two directions (only they
@@ -259,7 +259,7 @@ class ScaleFactorEstimator:
                 g: np.ndarray | None = None) -> None:
         """Advance over ``missing`` epochs without any data (the last GRS input held, see
         :meth:`_held_input`) up to the epoch whose input is ``following`` (see
-        :meth:`_held_input_continues`); ``g``: in an evaluation pass, the scale factors the held input is
+        :meth:`_switch_in_gap`); ``g``: in an evaluation pass, the scale factors the held input is
         applied with. A gap longer than ``max_bridged_gap_s``, or one across a switch with no GRS input
         after it, starts a new segment."""
         if missing <= 0:
