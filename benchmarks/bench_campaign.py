@@ -23,8 +23,10 @@ cancels. Printed per worker count, against the goals:
 * whether the engine's stderr (client, scheduler, nannies, workers: file descriptor 2 during the
   run, start and close included) was free of tracebacks and errors.
 
-``--ablation dask-default-env`` runs the engine as it was before this fix as well (Dask's default
-worker environment, with ``MALLOC_TRIM_THRESHOLD_=65536``, and no worker set-up), and
+``--ablation dask-default-env`` runs the engine as it was before its fixes as well (Dask's default
+worker environment, with ``MALLOC_TRIM_THRESHOLD_=65536``, Dask's worker configuration: the sampling
+profiler and a 20-ms health tick, and no worker set-up), ``--ablation dask-default-loop`` the engine with
+only Dask's worker configuration back (profiler, tick), and
 ``--dask-config KEY=VALUE`` sets a Dask configuration value for the engine (e.g.
 ``distributed.worker.profile.enabled=false``).
 
@@ -162,13 +164,24 @@ def run_engine(cases_spec: dict[str, Any], workers: int, label: str = "engine") 
 @contextmanager
 def _dask_default_env():
     """The engine as it was: Dask's default worker environment, no worker set-up."""
-    saved = engine.WORKER_PRE_SPAWN_ENV, engine.WORKER_SETUP
+    saved = engine.WORKER_PRE_SPAWN_ENV, engine.WORKER_CONFIG, engine.WORKER_SETUP
     engine.WORKER_PRE_SPAWN_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    engine.WORKER_SETUP = False
+    engine.WORKER_CONFIG, engine.WORKER_SETUP = {}, False
     try:
         yield
     finally:
-        engine.WORKER_PRE_SPAWN_ENV, engine.WORKER_SETUP = saved
+        engine.WORKER_PRE_SPAWN_ENV, engine.WORKER_CONFIG, engine.WORKER_SETUP = saved
+
+
+@contextmanager
+def _dask_default_loop():
+    """The engine with Dask's worker configuration (sampling profiler, 20-ms tick) and no worker set-up."""
+    saved = engine.WORKER_CONFIG, engine.WORKER_SETUP
+    engine.WORKER_CONFIG, engine.WORKER_SETUP = {}, False
+    try:
+        yield
+    finally:
+        engine.WORKER_CONFIG, engine.WORKER_SETUP = saved
 
 
 def _cpu_task(_: int) -> float:
@@ -218,7 +231,7 @@ def main() -> int:
     parser.add_argument("--cases-per-worker", type=int, default=0,
                         help="at least this many cases per worker (default 0: --cases for every worker count)")
     parser.add_argument("--duration-s", type=float, default=10800.0)
-    parser.add_argument("--ablation", choices=["dask-default-env", "no-profiler"], action="append", default=[])
+    parser.add_argument("--ablation", choices=["dask-default-env", "dask-default-loop"], action="append", default=[])
     parser.add_argument("--dask-config", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--control", action="store_true",
                         help="also time a pure-CPU and a memory-bound numpy task in pools of each size: the "
@@ -253,8 +266,8 @@ def main() -> int:
                     m = run_pool(cases[n], n)
                 elif label == "engine":
                     m = run_engine(spec_for(n), n)
-                elif label == "engine[no-profiler]":
-                    with dask.config.set({"distributed.worker.profile.enabled": False}):
+                elif label == "engine[dask-default-loop]":
+                    with _dask_default_loop():
                         m = run_engine(spec_for(n), n, label)
                 else:
                     with _dask_default_env():

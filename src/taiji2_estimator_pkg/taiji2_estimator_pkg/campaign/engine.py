@@ -28,6 +28,17 @@ from .store import done_case_hashes, provenance, write_chunk
 #: mmap, and a case costs 2.4-2.5x its time in a plain process (see :mod:`.worker`).
 WORKER_PRE_SPAWN_ENV: dict[str, str | None] = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
                                                "MKL_NUM_THREADS": "1", "MALLOC_TRIM_THRESHOLD_": None}
+#: The period of the event loop's health tick in a campaign worker [s] (Dask's default 20 ms,
+#: ``distributed.admin.tick.interval``): 50 wake-ups a second, each taking the GIL from the case's
+#: thread; with every core busy (2 workers on 2 cores) a warm case cost 1.09-1.16x the plain pool's
+#: with it and 0.97x at 1 s (bench_campaign, 16 cases each, 2026-11-26). The tick only watches the
+#: loop (a warning when a tick is more than ``distributed.admin.tick.limit``, 3 s, late).
+TICK_INTERVAL_S = 1.0
+#: Dask configuration of the embedded cluster's workers: no sampling profiler and a slow health
+#: tick, since each wake-up of a worker's event loop takes the GIL from its case (10-17 % and 9-16 %
+#: of a case; :func:`.worker.quiet_event_loop`, which does the same on an existing cluster).
+WORKER_CONFIG: dict[str, object] = {"distributed.worker.profile.enabled": False,
+                                    "distributed.admin.tick.interval": f"{TICK_INTERVAL_S}s"}
 #: Register :class:`.worker.CampaignWorkerSetup` on the cluster (restores glibc's thresholds in a
 #: worker started with Dask's default environment, e.g. on an existing cluster).
 WORKER_SETUP = True
@@ -174,14 +185,8 @@ def _local_cluster(workers: int) -> Any:
     import dask
     from dask.distributed import LocalCluster
 
-    from .worker import TICK_INTERVAL_S
-
     pre_spawn = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_PRE_SPAWN_ENV}
-    # no sampling profiler and a slow health tick in the workers: each wake-up of a worker's event
-    # loop takes the GIL from its case (.worker.quiet_event_loop: 10-17 % and 9-16 % of a case)
-    with dask.config.set({"distributed.nanny.pre-spawn-environ": pre_spawn,
-                          "distributed.worker.profile.enabled": False,
-                          "distributed.admin.tick.interval": f"{TICK_INTERVAL_S}s"}):
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": pre_spawn, **WORKER_CONFIG}):
         # the HTTP server (dashboard with bokeh, /health and metrics without) on a free port: the
         # default 8787 warns when another cluster holds it
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",

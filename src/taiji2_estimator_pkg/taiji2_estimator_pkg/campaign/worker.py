@@ -24,6 +24,8 @@ from typing import Any
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from .engine import TICK_INTERVAL_S
+
 #: glibc's mallopt parameters.
 M_TRIM_THRESHOLD = -1
 M_MMAP_THRESHOLD = -3
@@ -74,15 +76,9 @@ class _HeartbeatRaceFilter(logging.Filter):
 #: The worker's periodic callbacks of Dask's sampling profiler: every 10 ms (``distributed.worker.
 #: profile.interval``) the event-loop thread takes the GIL to walk the task thread's stack, and the
 #: case's thread waits for it back; a warm 3-h case cost 1.14x wall and 1.17x CPU of the same case in
-#: a plain process with it and 0.98x, 1.00x without (bench_campaign --ablation no-profiler, 18 cases,
+#: a plain process with it and 0.98x, 1.00x without (bench_campaign, profiler on and off, 18 cases,
 #: 2026-11-26). Campaign workers do not run it; the dashboard's profile page stays empty.
 PROFILER_CALLBACKS = ("profile", "profile-cycle")
-#: The period of the event loop's health tick in a campaign worker [s] (Dask's default 20 ms,
-#: ``distributed.admin.tick.interval``): 50 wake-ups a second, each taking the GIL from the case's
-#: thread; with every core busy (2 workers on 2 cores) a warm case cost 1.09-1.16x the plain pool's
-#: with it and 0.97x at 1 s (bench_campaign, 16 cases each, 2026-11-26). The tick only watches the
-#: loop (a warning when a tick is more than ``distributed.admin.tick.limit``, 3 s, late).
-TICK_INTERVAL_S = 1.0
 
 
 def quiet_event_loop(worker: Any) -> bool:
