@@ -4,7 +4,7 @@ Component-first (3, n) rows in the attitude solve, per-component matrix products
 skipped), chunked readouts written into the output arrays and per-source noise draws change where
 numbers live in memory, not which floating-point operations produce each of them; these tests hold
 every output bit to the (n, 3)-layout formulas the simulator used before. The one exception is the
-quaternion scan: its blocked association (:func:`quat_prefix_product`) differs from any earlier
+quaternion scan: its association by step index (:class:`AttitudeScan`) differs from any earlier
 one, so the attitude is held to the left-to-right product within its rounding bound.
 """
 
@@ -16,10 +16,11 @@ import numpy as np
 import pytest
 
 import taiji2_sim_pkg.core.simulator as simulator
+from taiji2_sim_pkg.core.attitude_scan import AttitudeScan
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.dynamics import propagate_attitude
 from taiji2_sim_pkg.core.effects import Effect
-from taiji2_sim_pkg.core.frames import apply_matrix, cross, quat_from_rotvec, quat_multiply, quat_prefix_product
+from taiji2_sim_pkg.core.frames import apply_matrix, cross, quat_from_rotvec, quat_multiply
 from taiji2_sim_pkg.core.noise import NoiseStreams
 from taiji2_sim_pkg.core.simulator import Simulator, maneuver_torque_commands
 
@@ -100,7 +101,7 @@ def test_attitude_solve_and_scan_are_bitwise_the_nx3_formulas(layout):
     sequential = _sequential_product([0.0, 0.0, 0.0, 1.0], increments)
     bound = _product_chain_bound(increments.shape[0])
     np.testing.assert_allclose(got.quat_xyzw, sequential, rtol=0, atol=bound)
-    np.testing.assert_allclose(quat_prefix_product(increments), sequential, rtol=0, atol=bound)
+    np.testing.assert_allclose(AttitudeScan([0.0, 0.0, 0.0, 1.0]).extend(increments), sequential, rtol=0, atol=bound)
 
 
 @pytest.mark.parametrize("count", [1, 63, 64, 65, 300])

@@ -12,7 +12,6 @@ from taiji2_sim_pkg.core.frames import (
     quat_conjugate,
     quat_from_rotvec,
     quat_multiply,
-    quat_prefix_product,
     quat_rotate,
     rotvec_from_quat,
 )
@@ -68,33 +67,6 @@ def test_rotvec_round_trip_including_zero_and_tiny_angles():
     np.testing.assert_array_equal(quat_from_rotvec(np.zeros(3)), [0, 0, 0, 1])
     np.testing.assert_array_equal(rotvec_from_quat([0, 0, 0, 1.0]), np.zeros(3))
     np.testing.assert_allclose(rotvec_from_quat(-quat_from_rotvec(v)), v, rtol=1e-13)  # q and -q
-
-
-def test_prefix_product_equals_sequential_product():
-    q = _random_unit_quats(1000)
-    sequential = [q[0]]
-    for k in range(1, len(q)):
-        sequential.append(quat_multiply(sequential[-1], q[k]))
-    np.testing.assert_allclose(quat_prefix_product(q), np.array(sequential), atol=1e-13)
-    np.testing.assert_array_equal(quat_prefix_product(q[:1]), q[:1])
-
-
-@pytest.mark.parametrize("count", [0, 1, 15, 16, 17, 255, 256, 257, 4099])
-def test_prefix_product_with_an_initial_attitude_at_every_block_boundary(count):
-    """The blocked scan (blocks of 16, padded tails, recursive carries) with q_init on the left:
-    the left-to-right product within 4 eps per product of either chain."""
-    q = _random_unit_quats(count)
-    initial = _random_unit_quats(1)[0]
-    expected, current = np.empty((count, 4)), initial
-    for k in range(count):
-        current = quat_multiply(current, q[k])
-        expected[k] = current
-    got = quat_prefix_product(q, initial_xyzw=initial)
-    assert got.shape == (count, 4) and got.flags.c_contiguous
-    np.testing.assert_allclose(got, expected, rtol=0, atol=8 * np.finfo(np.float64).eps * max(count, 1))
-    np.testing.assert_array_equal(quat_prefix_product(q[:1], initial_xyzw=initial), quat_multiply(initial, q[:1]))
-    with pytest.raises(ValueError, match="q: wrong shape"):
-        quat_prefix_product(q[:, :3])
 
 
 def test_cross_and_matrix_helpers_equal_numpy():

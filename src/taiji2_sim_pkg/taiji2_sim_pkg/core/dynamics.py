@@ -13,8 +13,9 @@ gyroscopic term)::
 
 The implicit equation is solved by Picard (fixed-point) iteration over a block of steps at once:
 the rates of the whole block follow from a cumulative sum of the increments, the gyroscopic term
-is re-evaluated, and so on to convergence; the attitude then follows from a blocked prefix product
-of the step rotations (:func:`.frames.quat_prefix_product`). For one step this is the plain fixed-point
+is re-evaluated, and so on to convergence; the attitude then follows from the running product of
+the step rotations (:class:`.attitude_scan.AttitudeScan`, whose association is fixed by the step
+index, so any cutting of a run into calls gives the same bits). For one step this is the plain fixed-point
 iteration of the streaming simulator, for n steps the vectorised batch solution: both converge to
 the same discrete trajectory. A block that does not converge (large rates) is split in halves.
 """
@@ -26,13 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .attitude_scan import AttitudeScan
 from .frames import (
     apply_matrix,
     apply_matrix_rows,
     cross,
     cross_rows,
     quat_from_rotvec,
-    quat_prefix_product,
 )
 
 __all__ = ["AttitudeSteps", "gyroscopic_torque_n_m", "propagate_attitude"]
@@ -200,15 +201,16 @@ def _solve_rates(omega_start: np.ndarray, torque: np.ndarray, inertia: np.ndarra
     return omega, omega_mid, omega_dot
 
 
-def propagate_attitude(quat_xyzw: ArrayLike, omega_rad_s: ArrayLike, torque_n_m: ArrayLike,
+def propagate_attitude(quat_xyzw: ArrayLike | AttitudeScan, omega_rad_s: ArrayLike, torque_n_m: ArrayLike,
                        inertia_kg_m2: ArrayLike, dt_s: float,
                        inertia_inv_kg_m2: ArrayLike | None = None) -> AttitudeSteps:
     """Propagate the attitude over n steps of constant torque.
 
     Parameters
     ----------
-    quat_xyzw : array_like
-        (4,) attitude at t_0.
+    quat_xyzw : array_like or AttitudeScan
+        (4,) attitude at t_0 (step 0 of a new scan), or the scan of the run so far, which this call
+        continues (and advances).
     omega_rad_s : array_like
         (3,) body rate at t_0 [rad/s].
     torque_n_m : array_like
@@ -231,6 +233,7 @@ def propagate_attitude(quat_xyzw: ArrayLike, omega_rad_s: ArrayLike, torque_n_m:
     omega, omega_mid, omega_dot = _solve_rates(np.asarray(omega_rad_s, dtype=np.float64), torque,
                                                inertia, inertia_inv, dt_s)
     increments = quat_from_rotvec(np.multiply(omega_mid, dt_s))
-    # q_{k+1} = q_0 (increment_0 ... increment_k): the initial attitude rides in the scan
-    quat = quat_prefix_product(increments, initial_xyzw=quat_xyzw)
+    # q_{k+1} = q_0 increment_0 ... increment_k, associated by step index (not by call)
+    scan = quat_xyzw if isinstance(quat_xyzw, AttitudeScan) else AttitudeScan(quat_xyzw)
+    quat = scan.extend(increments)
     return AttitudeSteps(quat, omega, omega_mid, omega_dot)

@@ -26,7 +26,6 @@ __all__ = [
     "quat_conjugate",
     "quat_from_rotvec",
     "quat_multiply",
-    "quat_prefix_product",
     "quat_rotate",
     "rotvec_from_quat",
 ]
@@ -340,81 +339,3 @@ def rotvec_from_quat(q: ArrayLike) -> np.ndarray:
     return 2.0 * ratio[..., None] * vector
 
 
-def quat_prefix_product(q: ArrayLike, initial_xyzw: ArrayLike | None = None) -> np.ndarray:
-    """Inclusive running product ``P_k = q_init q_0 q_1 ... q_k`` along axis 0.
-
-    A blocked scan: the steps are cut into blocks of :data:`_SCAN_BLOCK` consecutive quaternions;
-    the running products inside every block are built side by side (one vectorised product per
-    position in the block, over all blocks at once), the blocks' totals are scanned the same way
-    (recursively), and each block is then multiplied on the left by the product of everything
-    before it. About three vectorised products per quaternion in all, against ``log2 n`` for a
-    Hillis-Steele scan; the earlier factor is always on the left (quaternion products do not
-    commute). The association differs from a left-to-right product: results agree with it to
-    rounding (a few 1e-16 per product, growing with the block depth, not with n).
-
-    Parameters
-    ----------
-    q : array_like
-        (n, 4) quaternions xyzw.
-    initial_xyzw : array_like, optional
-        (4,) ``q_init`` on the left of every product (e.g. the attitude before the first step);
-        default: none (the identity).
-
-    Returns
-    -------
-    numpy.ndarray
-        (n, 4) running products.
-    """
-    quats = np.asarray(q, dtype=np.float64)
-    if quats.ndim != 2 or quats.shape[1] != 4:
-        raise ValueError(f"q: wrong shape {quats.shape}, expected (n, 4)")
-    count = quats.shape[0]
-    if count == 0:
-        return np.empty((0, 4))
-    if count <= _SCAN_BLOCK:
-        # one block: (4, n, 1), so that each position is a (4, 1) row of arrays
-        return _sequential_prefix_rows(quats.T[:, :, None], initial_xyzw)[:, :, 0].T.copy()
-    blocks = -(-count // _SCAN_BLOCK)
-    full = count // _SCAN_BLOCK
-    # (4, position in block, block): component rows with the positions of all blocks side by side;
-    # the tail is padded with identities (1 q = q exactly) and dropped at the end
-    rows = np.empty((4, _SCAN_BLOCK, blocks))
-    by_block = rows.transpose(2, 1, 0)  # (block, position, 4) view
-    by_block[:full] = quats[:full * _SCAN_BLOCK].reshape(full, _SCAN_BLOCK, 4)
-    if full < blocks:
-        tail = count - full * _SCAN_BLOCK
-        by_block[full, :tail] = quats[full * _SCAN_BLOCK:]
-        by_block[full, tail:] = _IDENTITY_XYZW
-    inner = _sequential_prefix_rows(rows, None)
-    # what multiplies each block from the left: q_init times the totals of all earlier blocks
-    carry = np.empty((4, 1, blocks))
-    carry[:, 0, 0] = _IDENTITY_XYZW if initial_xyzw is None else np.asarray(initial_xyzw, dtype=np.float64)
-    carry[:, 0, 1:] = quat_prefix_product(inner[:, -1, :-1].T, initial_xyzw).T
-    _hamilton_product(carry, inner, rows, np.empty(rows.shape[1:]))
-    out = np.empty((blocks * _SCAN_BLOCK, 4))
-    by_block_out = out.reshape(blocks, _SCAN_BLOCK, 4)
-    for axis in range(4):  # per component: long loops, not one of four per quaternion
-        by_block_out[:, :, axis] = rows[axis].T
-    return out[:count]
-
-
-#: Quaternions per block of :func:`quat_prefix_product` (positions scanned one after the other).
-_SCAN_BLOCK = 16
-_IDENTITY_XYZW = (0.0, 0.0, 0.0, 1.0)
-
-
-def _sequential_prefix_rows(rows: np.ndarray, initial_xyzw: ArrayLike | None) -> np.ndarray:
-    """Running products of component-first quaternions (4, n, m) along axis 1, left to right.
-
-    Each position is one vectorised product over the trailing axes (the blocks of the caller).
-    """
-    out = np.empty_like(rows)
-    scratch = np.empty(rows.shape[2:])
-    if initial_xyzw is None:
-        out[:, 0] = rows[:, 0]
-    else:
-        initial = np.asarray(initial_xyzw, dtype=np.float64).reshape(4, 1)
-        _hamilton_product(initial, rows[:, 0], out[:, 0], scratch)
-    for position in range(1, rows.shape[1]):
-        _hamilton_product(out[:, position - 1], rows[:, position], out[:, position], scratch)
-    return out

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .attitude_scan import AttitudeScan
 from .config import SimConfig, TimingConfig
 from .dynamics import propagate_attitude
 from .effects import Effect
@@ -211,7 +212,8 @@ class Simulator:
         self._t0_s = float(t0_s)
         self._dt_s = config.dt_s
         self._step_index = 0
-        self._quat = np.array(config.spacecraft.initial_attitude_xyzw, dtype=np.float64)
+        # the attitude's running product, associated by step index: any chunking gives the same bits
+        self._attitude = AttitudeScan(np.array(config.spacecraft.initial_attitude_xyzw, dtype=np.float64))
         self._omega = np.array(config.spacecraft.initial_rate_rad_s, dtype=np.float64)
         self._inertia_inv = np.linalg.inv(config.spacecraft.inertia_kg_m2)
         sensors = config.grs.sensors
@@ -276,7 +278,7 @@ class Simulator:
     @property
     def quat_xyzw(self) -> np.ndarray:
         """Current true attitude (4,) (copy)."""
-        return self._quat.copy()
+        return self._attitude.attitude_xyzw
 
     @property
     def omega_rad_s(self) -> np.ndarray:
@@ -356,7 +358,7 @@ class Simulator:
             inertia = effect.inertia_kg_m2(t_start, inertia)
         # the configured J keeps its precomputed inverse; an effect's J is inverted per block
         inertia_inv = self._inertia_inv if inertia is config.spacecraft.inertia_kg_m2 else None
-        attitude = propagate_attitude(self._quat, self._omega, torque, inertia, self._dt_s, inertia_inv)
+        attitude = propagate_attitude(self._attitude, self._omega, torque, inertia, self._dt_s, inertia_inv)
 
         a_sc = noise.draw_source("thruster_force", count, out=spacecraft[1])
         if force_cmd_n is not None:
@@ -403,7 +405,6 @@ class Simulator:
                 quat = effect.star_tracker_quat_xyzw(t_end[window], quat)
             st_quat[window] = quat
 
-        self._quat = attitude.quat_xyzw[-1].copy()
         self._omega = attitude.omega_rad_s[-1].copy()
         self._step_index += count
         truth = SimTruth(
