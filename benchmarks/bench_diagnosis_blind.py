@@ -34,6 +34,12 @@ Usage::
 
     python benchmarks/bench_diagnosis_blind.py [--sets 40] [--layout type1] [--seed 1] [--workers 2]
         [--duration-s 10800] [--kmin 4] [--kmax 12] [--reference-fraction 0.5] [--json results.json]
+        [--clean N] [--pairs N] [--out-of-catalog N] [--onset-fraction F] [--transients N] [--multi N]
+
+The extended plan of issue 24 (onsets, multi-parameter effects, transients, both fidelities)::
+
+    python benchmarks/bench_diagnosis_blind.py --sets 36 --clean 8 --pairs 2 --out-of-catalog 2 \
+        --onset-fraction 0.7 --transients 3 --multi 3 --json taiji2_out/blind.json
 """
 
 from __future__ import annotations
@@ -256,6 +262,89 @@ def transient_plan(count: int, seed: int, model: NominalModel, duration_s: float
     return plan
 
 
+#: Multi-parameter effects (issue 24: one effect, several parameters): (family, variant suffixes of one
+#: GRS or axis set). The variants' specs of one effect are merged into one spec (vectors add) where the
+#: effect takes a vector, else injected side by side (a drift of several channels).
+MULTI_KINDS = (("cross_coupling", ("misalign_x", "misalign_y", "misalign_z", "imbalance_x", "imbalance_y",
+                                   "imbalance_z")),
+               ("cross_coupling", ("misalign_x", "misalign_y", "misalign_z")),
+               ("inertia_error", ("x", "y", "z")),
+               ("com_drift", ("x", "y", "z")),
+               ("scale_factor_drift", ("x", "y", "z")))
+
+
+def _merged(specs: list[dict]) -> list[dict]:
+    """Specs of one effect merged: the vectors of the same effect (name, GRS) added."""
+    out: dict[tuple, dict] = {}
+    vectors = ("misalignment_rad", "imbalance", "relative", "products_kg_m2", "rate_m_s")
+    for spec in specs:
+        key = (spec["name"], spec.get("grs"), None if any(v in spec for v in vectors) else spec.get("axis"))
+        if key not in out:
+            out[key] = dict(spec)
+            continue
+        for name in vectors:
+            if name in spec:
+                base = np.asarray(out[key].get(name, np.zeros(3)), dtype=np.float64)
+                out[key][name] = (base + np.asarray(spec[name], dtype=np.float64)).tolist()
+    return list(out.values())
+
+
+def multi_plan(count: int, seed: int, sigmas: dict[str, float], model: NominalModel, fidelity: str,
+               kmin: float = 6.0, kmax: float = 12.0) -> list[dict]:
+    """Multi-parameter sets: every variant of one effect of one GRS (or the three axes) at once, each
+    component k sigma (k uniform in kmin..kmax, random sign), the kinds of :data:`MULTI_KINDS` in turn."""
+    rng = np.random.default_rng(seed + 32452843)
+    candidates, _ = candidate_catalog()
+    by_key = {c.key: c for c in candidates}
+    plan = []
+    for i in range(count):
+        family, suffixes = MULTI_KINDS[i % len(MULTI_KINDS)]
+        grs = int(rng.integers(1, 3))
+        prefix = "" if family == "inertia_error" else f"grs{grs}."
+        keys = [f"{family}[{prefix}{suffix}]" for suffix in suffixes]
+        truth, specs, ks = {}, [], []
+        for key in keys:
+            ks.append(float(rng.uniform(kmin, kmax)))
+            magnitude = float(rng.choice([-1.0, 1.0]) * ks[-1] * sigmas[key])
+            truth[key] = magnitude
+            specs.append(by_key[key].inject(np.array([magnitude]), model))
+        drawn = [{"family": family, "variant": f"{family}[{prefix}{'+'.join(suffixes)}]", "k": max(ks),
+                  "spec": spec, "truth": truth if j == 0 else {}} for j, spec in enumerate(_merged(specs))]
+        plan.append({"kind": "multi", "effects": drawn, "fidelity": fidelity,
+                     "timing": _timing_convention(rng) if fidelity == "reference" else {}})
+    return plan
+
+
+def multi_scores(results: list[dict]) -> dict:
+    """Multi-parameter sets: named as the one drawn family (no other physical name but its aliases, not "unexplained"),
+    and the magnitudes (the standing family's vector, else the accepted variants') against the truth."""
+    rows = [r for r in results if r["kind"] == "multi"]
+    named, named_once, zs = 0, 0, []
+    for r in rows:
+        family = r["drawn"][0]["family"]
+        truth = r["drawn"][0]["truth"]
+        physical = _physical(r["accepted"])
+        # every physical name is the family or an alias of it (a torque gain for an inertia error)
+        only_family = bool(physical) and all(a["name"] == family or any(_family(x) == family for x in a["aliases"])
+                                             for a in physical)
+        if only_family and not r["verdict"]["unexplained"]:
+            named += 1
+        standing = [f for f in r["verdict"].get("families", []) if f["stands"] and f["family"].startswith(family)]
+        if standing and only_family:
+            named_once += 1
+            for key, value, sigma in zip(standing[0]["variants"], standing[0]["magnitudes"], standing[0]["sigmas"],
+                                         strict=True):
+                if key in truth and sigma > 0:
+                    zs.append((value - truth[key]) / sigma)
+        else:
+            zs += [(a["magnitude"] - truth[a["key"]]) / a["sigma"] for a in r["accepted"]
+                   if a["key"] in truth and a["sigma"]]
+    z = np.array(zs)
+    return {"multi_sets": len(rows), "multi_named_family_only": named, "multi_named_as_one_family": named_once,
+            "multi_magnitude_z_std": float(np.std(z)) if z.size > 1 else None,
+            "multi_magnitude_within_3_sigma": float(np.mean(np.abs(z) <= 3.0)) if z.size else None}
+
+
 def run_one(args: tuple[dict, str, float]) -> dict:
     """Simulate one data set and diagnose it from the raw arrays only."""
     entry, layout, duration_s = args
@@ -377,6 +466,7 @@ def score(results: list[dict], sigma_e: float) -> dict:
     table["clean_sets"] = len(clean)
     table["false_alarms_physical"] = sum(bool(_physical(r["accepted"])) for r in clean)
     table["clean_unexplained"] = sum(bool(r["verdict"]["unexplained"]) for r in clean)
+    table["clean_alarms"] = sum(bool(_physical(r["accepted"])) or bool(r["verdict"]["unexplained"]) for r in clean)
     table["timing_on_clean"] = timing_findings(clean, sigma_e)
     rows = []
     for r in results:
@@ -445,6 +535,7 @@ def score(results: list[dict], sigma_e: float) -> dict:
     table["single_top1_alias_aware_by_family"] = per_family
     table.update(onset_scores(results))
     table.update(transient_scores(results))
+    table.update(multi_scores(results))
     table.update(corrected_scores(results))
     table["seconds_median"] = float(np.median([r["seconds"] for r in results]))
     table["seconds_max"] = float(np.max([r["seconds"] for r in results]))
@@ -520,7 +611,7 @@ def corrected_scores(results: list[dict]) -> dict:
     sets = 0
     for r in results:
         cal = r.get("calibration")
-        if not cal or not cal["corrected"] or r["kind"] not in ("one", "two"):
+        if not cal or not cal["corrected"] or r["kind"] not in ("one", "two", "multi"):
             continue
         sets += 1
         g_true, d_true = np.array(cal["g_true"]), np.array(cal["d_true"])
@@ -560,6 +651,8 @@ def main() -> int:
                         help="two-effect sets per fidelity (default 15 %%, at least 3)")
     parser.add_argument("--transients", type=int, default=0,
                         help="transient sets (a torque pulse) per fidelity, added to --sets (default 0)")
+    parser.add_argument("--multi", type=int, default=0,
+                        help="multi-parameter sets (one effect, several parameters) per fidelity, added to --sets")
     parser.add_argument("--onset-fraction", type=float, default=0.0,
                         help="fraction of the drawn effects (single sets, second effect of pairs) that start "
                              "mid-run (default 0: the plan of the earlier runs)")
@@ -586,6 +679,9 @@ def main() -> int:
     if args.transients:
         plan += transient_plan(args.transients, args.seed, model, args.duration_s, "standard")
         plan += transient_plan(args.transients, args.seed + 1, model, args.duration_s, "reference")
+    if args.multi:
+        plan += multi_plan(args.multi, args.seed, sigmas, model, "standard")
+        plan += multi_plan(args.multi, args.seed + 1, sigmas, model, "reference")
     for index, entry in enumerate(plan):
         entry["index"], entry["seed"] = index, args.seed * 1000 + index
     results: list[dict] = []
@@ -638,10 +734,10 @@ def main() -> int:
         if table is None:
             continue
         goals += [
-            (f"{name}: top-1 (alias-aware) at detectable magnitudes >= 0.90", table["single_detectable_sets"],
-             table["single_detectable_top1_alias_aware"] >= 0.9),
-            (f"{name}: clean data without a physical name >= 95 %", table["clean_sets"],
-             table["false_alarms_physical"] <= 0.05 * max(table["clean_sets"], 1)),
+            (f"{name}: top-1 (alias-aware) at detectable magnitudes >= 0.95", table["single_detectable_sets"],
+             table["single_detectable_top1_alias_aware"] >= 0.95),
+            (f"{name}: clean data named or 'unexplained' <= 5 %", table["clean_sets"],
+             table["clean_alarms"] <= 0.05 * max(table["clean_sets"], 1)),
             (f"{name}: out of catalog unexplained, no confident wrong name", table["out_of_catalog_sets"],
              table["out_of_catalog_unexplained"] == 1.0 and table["out_of_catalog_confident_wrong"] == 0.0)]
     reference = tables.get("reference")
@@ -659,6 +755,8 @@ def main() -> int:
                       table["onset_drawn_z_std"] is not None and 0.8 <= table["onset_drawn_z_std"] <= 1.25))
         goals.append((f"{name}: transient unexplained with a window holding it >= 90 %", table["transient_sets"],
                       table["transient_window_contains_it"] >= 0.9 * max(table["transient_sets"], 1)))
+        goals.append((f"{name}: multi-parameter effect named as its family alone >= 90 %", table["multi_sets"],
+                      table["multi_named_family_only"] >= 0.9 * max(table["multi_sets"], 1)))
         goals.append((f"{name}: corrected G, d within 2 sigma where biased >= 90 %",
                       table["corrected_biased_parameters"], (table["corrected_biased_within_2_sigma"] or 0.0) >= 0.9))
     goals.append(("<= 60 s per 3-h set", len(plan), tables["all"]["seconds_max"] <= 60.0))
