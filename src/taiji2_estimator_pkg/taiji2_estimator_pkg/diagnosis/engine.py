@@ -720,7 +720,8 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
 
     # 6. the corrected calibration: the model extended with the named effects, G and d re-calibrated --
     by_key = {c.key: c for c in candidates}
-    timing_change, named_fixed, specs = named_extension(reports, by_key, full.onsets, t_mid)
+    standing = [f for f in result.verdict.get("families", []) if f["stands"]]
+    timing_change, named_fixed, specs = named_extension(reports, by_key, full.onsets, t_mid, model, standing)
     if options.corrected_calibration and (named_fixed or any(timing_change)):
         say("corrected calibration: G and d under the model extended with the named effects")
         result.corrected = corrected_calibration(inp, model, settings, timing_change, [*fixed, *named_fixed],

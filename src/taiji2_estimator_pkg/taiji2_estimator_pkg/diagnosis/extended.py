@@ -136,17 +136,28 @@ def extend_model(model: NominalModel, settings: RecordSettings) -> tuple[Nominal
 
 
 def named_extension(reports: Sequence[Any], candidates: Mapping[str, Candidate], onsets: Mapping[str, float],
-                    t_mid_s: float) -> tuple[tuple[float, float, float], list[Fixed], list[dict[str, Any]]]:
-    """The named effects as a model extension: timing changes (D, e, T), fixed variants and catalog specs."""
+                    t_mid_s: float, model: NominalModel, families: Sequence[Mapping[str, Any]] = ()
+                    ) -> tuple[tuple[float, float, float], list[Fixed], list[dict[str, Any]]]:
+    """The named effects as a model extension: timing changes (D, e, T), fixed variants and catalog specs.
+
+    A family named as one candidate (``families``: the standing entries of the verdict's
+    ``families``) enters with every variant at the family fit's values, the variants selection did
+    not take included: the calibration is corrected for the whole effect, not for its stack.
+    """
     timing = [0.0, 0.0, 0.0]
     fixed: list[Fixed] = []
     specs: list[dict[str, Any]] = []
-    for report in reports:
-        if not report.accepted or report.key not in candidates:
-            continue
-        candidate = candidates[report.key]
-        values = np.array([report.parameters[p]["value"] for p in candidate.params], dtype=np.float64)
-        onset = onsets.get(report.key)
+    values_of: dict[str, np.ndarray] = {}
+    for family in families:
+        magnitudes = iter(family["magnitudes"])
+        for key in family["variants"]:
+            values_of[key] = np.array([next(magnitudes) for _ in candidates[key].params], dtype=np.float64)
+    entries = [(report.key, np.array([report.parameters[p]["value"] for p in candidates[report.key].params],
+                                     dtype=np.float64))
+               for report in reports if report.accepted and report.key in candidates and report.key not in values_of]
+    for key, values in [*entries, *values_of.items()]:
+        candidate = candidates[key]
+        onset = onsets.get(key)
         if candidate.name in TIMING_CONVENTION and onset is None:
             for i, unit in enumerate(TIMING_CONVENTION[candidate.name]):
                 timing[i] += unit * float(values[0])
@@ -154,7 +165,7 @@ def named_extension(reports: Sequence[Any], candidates: Mapping[str, Candidate],
             continue
         t_ref = t_mid_s if candidate.onset_kind == "ramp" else None
         fixed.append((candidate, values, onset, t_ref))
-        spec = dict(report.injection)
+        spec = dict(candidate.inject(values, model))
         if onset is not None:
             spec["onset_s"] = float(onset)
         if t_ref is not None:

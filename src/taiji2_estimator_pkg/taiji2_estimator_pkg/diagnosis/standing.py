@@ -10,11 +10,11 @@ naming them would be a confident wrong name. So an accepted effect is named only
    fixed, to the held-out third gains against "no effect" by that many sigma), raised to
    ``HELDOUT_Z_MIN_UNEXPLAINED`` when a gap stays unexplained (the situation in which partial
    explanations are selected);
-3. it is not one of ``FAMILY_VARIANTS_MAX + 1`` or more variants of one physical family accepted
-   together, unless the family as one candidate stands (:func:`family_group`, engine
-   ``_families``): forward selection stacking variants of one family is how a catalog imitates an
-   effect it does not hold (a left-out TM stiffness fitted by four electrode imbalances). The
-   family (all its variants, one GRS) is one candidate with its whole parameter count in the
+3. it is not one of ``FAMILY_VARIANTS_MAX + 1`` or more variants of one physical family (one GRS's
+   effect, :func:`family_group`) accepted together and standing on rules 1 and 2, unless the family
+   as one candidate stands (engine ``_families``): forward selection stacking variants of one family
+   is how a catalog imitates an effect it does not hold (a left-out TM stiffness fitted by four
+   electrode imbalances). The family (all its variants, one GRS) is one candidate with its whole parameter count in the
    penalty: it stands when it is complete, or when the variants the stack lacks gain more than
    their BIC penalty (a full cross-talk matrix of which selection took four terms); a stack whose
    family-level fit does not beat it is reported as an unexplained gap, not as a list of names.
@@ -86,19 +86,24 @@ def standing_verdict(reports: Sequence[Any], unexplained: bool, families: Sequen
     """
     named = []
     rejected: dict[str, str] = {}
-    stacked: dict[str, int] = {}
     standing_families = set(families)
+    reasons = {report.key: _reason(report, unexplained) for report in reports if report.accepted}
+    # the stacks of rule 3: variants of one physical family (one GRS's effect, family_group) that stand
+    # on rules 1 and 2 (a variant the held-out data refuse, or one of the other GRS, is no part of it)
+    stacked: dict[str, int] = {}
     for report in reports:
-        if report.accepted and report.variant:  # physical families have variants; timing and noise do not
-            stacked[report.name] = stacked.get(report.name, 0) + 1
+        if report.accepted and report.variant and reasons[report.key] is None:
+            group = family_group(report.name, report.variant)
+            stacked[group] = stacked.get(group, 0) + 1
     for report in reports:
         if not report.accepted:
             continue
-        reason = _reason(report, unexplained)
-        if (reason is None and stacked.get(report.name, 0) > FAMILY_VARIANTS_MAX
-                and family_group(report.name, report.variant) not in standing_families
+        reason = reasons[report.key]
+        group = family_group(report.name, report.variant) if report.variant else ""
+        if (reason is None and stacked.get(group, 0) > FAMILY_VARIANTS_MAX
+                and group not in standing_families
                 and subfamily_group(report.name, report.variant) not in standing_families):
-            reason = (f"one of {stacked[report.name]} variants of {report.name} accepted together: they imitate "
+            reason = (f"one of {stacked[group]} variants of {group} accepted together: they imitate "
                       f"a gap that no single catalog effect explains (the family as one candidate does not beat "
                       f"them)")
         if reason is None:
