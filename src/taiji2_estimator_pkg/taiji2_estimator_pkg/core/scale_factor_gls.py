@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike
 
 from .attitude import AttitudeIntegrator
 from .epoch_arrays import EpochArrays
+from .gate_estimate import GateEstimate, gate_estimate
 from .instrument import InstrumentModel
 from .kalman import chi2_gate
 from .scale_factor_estimate import ScaleFactorEstimate, StepReport
@@ -137,6 +138,19 @@ class ScaleFactorEstimator:
                 self.determined = self._check_determined(info)
             self._cache = (theta, cov, full and self.determined)
         return self._cache
+
+    def _gate_estimate(self) -> GateEstimate | None:
+        """The estimate from the epochs so far, for the gates of the next one (None: not determined).
+
+        Once determined, by a Cholesky factor of the information (core/gate_estimate.py: the same algebra
+        as :meth:`_solve`'s inverse, a fraction of its cost); :meth:`_solve` where it has the solution
+        already (an estimate was asked for since the last epoch), before, or where the factor fails."""
+        if self.determined and self._cache is None:
+            solved = gate_estimate(*self._total_information())
+            if solved is not None:
+                return GateEstimate(*solved)
+        theta, cov, ok = self._solve()
+        return GateEstimate.from_covariance(theta, cov) if ok else None
 
     def estimate(self) -> ScaleFactorEstimate:
         """Running estimate with its covariance (all GRS jointly); NaN until determined."""
@@ -333,16 +347,18 @@ class ScaleFactorEstimator:
             self._bridge(index - self.last_index - 1, (diffs, tuple(g for g in self.grs_ids if g in diffs)))
         self.last_index = index
         self.t_last_s = float(t_s)
-        theta, cov, ok = self._solve()
-        estimate = (theta, cov) if ok else None
+        estimate = self._gate_estimate()
+        ok = estimate is not None
         present = tuple(g for g in self.grs_ids if g in diffs)
         nis_grs = float("nan")
         if len(self.grs_ids) == 2 and len(present) == 2:
             d_row = self.model.difference_row(diffs[self.grs_ids[0]], diffs[self.grs_ids[1]])
-            if ok:
-                resid = d_row @ theta[:6]
-                total = self.model.q_grs[self.grs_ids[0]] + self.model.q_grs[self.grs_ids[1]] \
-                    + d_row @ cov[:6, :6] @ d_row.T
+            if estimate is not None:
+                p = self.model.n_params
+                resid = d_row @ estimate.theta[:p]
+                rows = np.zeros((d_row.shape[0], self.filter.q_total))
+                rows[:, :p] = d_row
+                total = self.model.q_grs[self.grs_ids[0]] + self.model.q_grs[self.grs_ids[1]] + estimate.spread(rows)
                 nis_grs = float(resid @ np.linalg.solve(total, resid))
             if self.gate is not None and ok and nis_grs > self.gate:
                 self.n_gated_grs += 1  # inconsistent GRS pair: use neither at this epoch

@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike
 
 from taiji2_estimator_pkg.core.factored_steady import RegressorFactors, run_steady_factored
 from taiji2_estimator_pkg.core.first_order import first_order_recursion
+from taiji2_estimator_pkg.core.gate_estimate import GateEstimate
 
 __all__ = [
     "RegularRunOutput",
@@ -457,7 +458,7 @@ class TwoStageFilter:
     # per-sample path -----------------------------------------------------------------------------
     def step(self, y: ArrayLike | None = None, x_reg: ArrayLike | None = None, u0: ArrayLike | None = None,
              u_reg: ArrayLike | None = None, rows: ArrayLike | None = None, q: ArrayLike | None = None,
-             gate: float | None = None, estimate: tuple[np.ndarray, np.ndarray] | None = None,
+             gate: float | None = None, estimate: GateEstimate | None = None,
              r: ArrayLike | None = None) -> StepInfo:
         """Process one sample: predict (unless first of a segment), then update.
 
@@ -477,9 +478,9 @@ class TwoStageFilter:
             (n, n) process noise of this step if not the nominal one.
         gate : float, optional
             NIS threshold (None: no gating; gating needs ``estimate``).
-        estimate : (theta, covariance), optional
-            Current estimate of all q_total parameters and its covariance, for the pre-fit NIS
-            ``e^T (Lambda + S Cov S^T)^-1 e``, ``e = e0 - S theta`` (None: no NIS).
+        estimate : GateEstimate, optional
+            Current estimate of all q_total parameters and its covariance (as a factor), for the pre-fit
+            NIS ``e^T (Lambda + S Cov S^T)^-1 e``, ``e = e0 - S theta`` (None: no NIS).
         r : array_like, optional
             (m, m) measurement noise of this step if not the nominal one (rows are selected from it).
 
@@ -537,9 +538,8 @@ class TwoStageFilter:
             post_nis = float("nan")
         nis_value = float("nan")
         if estimate is not None and s is not None:
-            theta, cov_theta = estimate
-            resid = e0 - s @ theta
-            total = lam + s @ cov_theta @ s.T
+            resid = e0 - s @ estimate.theta
+            total = lam + estimate.spread(s)
             nis_value = float(resid @ np.linalg.solve(total, resid))
         if gate is not None and np.isfinite(nis_value) and nis_value > gate:
             self.n_rejected += 1
