@@ -31,9 +31,10 @@ acceleration), mapped to the channels by :func:`perturbation_channels`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.special import eval_laguerre
 
 from taiji2_sim_pkg.core.frames import cross, quat_conjugate, quat_multiply, rotvec_from_quat
 from taiji2_sim_pkg.core.timing import actuated_commands
@@ -54,6 +55,7 @@ __all__ = [
     "nuisance_names",
     "perturbation_channels",
     "readouts_from_input",
+    "startup_function",
     "torque_edges",
 ]
 
@@ -63,6 +65,16 @@ N_CHANNELS = len(CHANNELS)
 ST, TORQUE, ANG_DIFF, LIN_COMMON, LIN_DIFF = (slice(3 * i, 3 * i + 3) for i in range(5))
 WRAP_SAMPLES = {"st": 2, "lin_common": 1}
 """Leading samples of the channels with memory that the fit frees (impulse columns)."""
+
+STARTUP_TIME_SCALE_S = 10.0
+"""Time scale a [s] of the GRS start-up transient basis (:func:`startup_function`)."""
+
+STARTUP_ORDER = 12
+"""Laguerre functions per GRS angular readout in the start-up transient (:func:`startup_function`)."""
+
+STARTUP_SUPPORT_S = 1300.0
+"""Time after the first sample beyond which the start-up functions are set to zero [s] (every one of
+them is below 1e-12 of its unit peak after 1242 s)."""
 
 TIMING_REACH_S = 0.5
 """Largest delay change [s] the timing candidates consider: the torque channel is set to zero over
@@ -372,6 +384,24 @@ def perturbation_channels(lin: Linearization, model: NominalModel, dg: np.ndarra
     return out
 
 
+def startup_function(order: int, n: int, dt_s: float) -> np.ndarray:
+    """(n,) the Laguerre function ``exp(-t / 2a) L_order(t / a)`` of the time t since the first sample.
+
+    A GRS readout's free response from its initial state (the readout electronics settling after
+    switch-on, a test mass re-centred by its suspension loop at the start of the record) is a sum of
+    damped exponentials of its own time constants. The first :data:`STARTUP_ORDER` functions span
+    such settling for time constants from ~3 s to ~100 s (a = :data:`STARTUP_TIME_SCALE_S`: of an
+    exponential of 3 s / 30 s / 100 s, 7e-4 / 7e-15 / 6e-5 of its power lies outside the span) and
+    fall below 1e-3 of their peak within ~11 min (zero after :data:`STARTUP_SUPPORT_S`); a lightly
+    damped oscillation lasting minutes is only partly absorbed and stays visible.
+    """
+    support = min(n, math.ceil(STARTUP_SUPPORT_S / dt_s))
+    out = np.zeros(n)
+    scaled = np.arange(support) * dt_s / STARTUP_TIME_SCALE_S
+    out[:support] = np.exp(-0.5 * scaled) * eval_laguerre(order, scaled)
+    return out
+
+
 def nuisance_names() -> list[str]:
     """Names of the nuisance columns (see :func:`nuisance_column`)."""
     names = [f"G.{grs}.{axis}" for grs in (1, 2) for axis in ("phi", "theta", "psi")]
@@ -380,6 +410,8 @@ def nuisance_names() -> list[str]:
     for group, count in WRAP_SAMPLES.items():
         start = GROUPS.index(group) * 3
         names += [f"wrap.{CHANNELS[start + axis]}.{j}" for axis in range(3) for j in range(count)]
+    names += [f"startup.{grs}.{axis}.{j}" for grs in (1, 2) for axis in ("phi", "theta", "psi")
+              for j in range(STARTUP_ORDER)]
     return names
 
 
@@ -392,6 +424,12 @@ def nuisance_column(lin: Linearization, model: NominalModel, name: str) -> np.nd
     - ``trend.<channel>``: linear trend of a channel (GRS bias drift; the constant is the dropped
       DC bin).
     - ``wrap.<channel>.<j>``: impulse at a leading sample of a channel with memory.
+    - ``startup.<grs>.<phi|theta|psi>.<j>``: start-up transient of a GRS angular readout, the j-th
+      function of :func:`startup_function` added to that readout [rad s^-2]: a record from another
+      source starts where the readout chain or the test mass is still settling from its initial
+      state (e.g. a warm-up of the readout bias), which the stationary noise model cannot describe.
+      Only the readout: the spacecraft does not move with it, so it shows in ``ang_diff`` and, via
+      ``m x d``, in the linear channels.
 
     Parameters
     ----------
@@ -437,5 +475,24 @@ def nuisance_column(lin: Linearization, model: NominalModel, name: str) -> np.nd
         return column
     if kind == "wrap":
         column[int(rest[1]), CHANNELS.index(rest[0])] = 1.0
+        return column
+    if kind == "startup":
+        grs = int(rest[0]) - 1
+        axis = ("phi", "theta", "psi").index(rest[1])
+        basis = startup_function(int(rest[2]), n, model.dt_s)
+        # built on the function's support only (+1 sample for the filters with memory): 10x cheaper at
+        # 3 h; the torque channel's zeroed tail lies beyond it unless the record is that short
+        head, tail = lin.torque_edges
+        rows = min(n, math.ceil(STARTUP_SUPPORT_S / model.dt_s) + 1)
+        short = rows + tail < n
+        if short:
+            lin = replace(lin, m=lin.m[:rows], torque_edges=(head, 0))
+            basis = basis[:rows]
+        dg = np.zeros((basis.shape[0], 2, 3))
+        dg[:, grs] = np.outer(basis, model.p_crf[grs][:, axis])
+        block = perturbation_channels(lin, model, dg=dg)
+        if not short:
+            return block
+        column[:rows] = block
         return column
     raise ValueError(f"unknown nuisance column {name!r}")
