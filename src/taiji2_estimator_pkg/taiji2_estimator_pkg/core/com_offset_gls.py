@@ -22,7 +22,7 @@ from .com_offset_estimate import ComOffsetEstimate
 from .com_offset_model import ComOffsetModel, ComOffsetOptions
 from .epoch_arrays import EpochArrays
 from .gate_estimate import MIN_EIGENVALUE_RATIO, GateEstimate, gate_estimate
-from .instrument import InstrumentModel, angular_differences, linear_sums
+from .instrument import InstrumentModel
 from .joint_com_offset import solve_joint
 from .kalman import chi2_gate
 from .noise_level import BLOCK_S, BandNoise, band_noise, r_adjustment
@@ -32,6 +32,8 @@ from .validation import InputValidator, ValidationOptions, validate_batch
 
 #: at most this many re-estimations with the measured band noise (noise_level.py)
 _NOISE_ITERATIONS = 4
+#: (vx, vy, vz) differences in the order of :func:`~.instrument.angular_differences` (vy, vz, vx)
+_ANGULAR_ORDER = np.array([1, 2, 0])
 
 
 def whitening(engine: TwoStageFilter) -> np.ndarray:
@@ -152,7 +154,12 @@ class ComOffsetEstimator:
 
     def solve(self, g: ArrayLike) -> tuple[np.ndarray, np.ndarray, bool]:
         """(beta (with SRP x0), covariance, determined) for scale factors g."""
-        info, vec, _, _ = self._beta_system(np.asarray(g, dtype=np.float64))
+        return self._solve_system(np.asarray(g, dtype=np.float64), self._beta_system(np.asarray(g, dtype=np.float64)))
+
+    def _solve_system(self, g: np.ndarray, system: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+                      ) -> tuple[np.ndarray, np.ndarray, bool]:
+        """:meth:`solve` of the :meth:`_beta_system` ``system`` at g."""
+        info, vec, _, _ = system
         beta, cov, full = solve_information(info, vec)
         if full and not self.determined:
             n_d = self.model.n_d
@@ -167,10 +174,16 @@ class ComOffsetEstimator:
     def jacobian(self, g: ArrayLike) -> np.ndarray:
         """(n_d, n_g) dd^/dG at scale factors g."""
         g = np.asarray(g, dtype=np.float64)
+        system = self._beta_system(g)
+        beta, cov, _ = solve_information(system[0], system[1])
+        return self._jacobian(system, beta, cov, self.corrected_information())
+
+    def _jacobian(self, system: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], beta: np.ndarray,
+                  cov: np.ndarray, info_all: np.ndarray) -> np.ndarray:
+        """:meth:`jacobian` from the :meth:`_beta_system` ``system`` at g, its solution (``beta``, ``cov``) and
+        :meth:`corrected_information` (computed once by :meth:`estimate`)."""
         model = self.model
-        info, vec, a_xx, a_yy = self._beta_system(g)
-        beta, cov, _ = solve_information(info, vec)
-        info_all = self.corrected_information()
+        _, _, a_xx, a_yy = system
         jac = np.zeros((model.n_d, model.n_g))
         for j in range(model.n_g):
             da_x = np.zeros_like(a_xx)
@@ -200,18 +213,22 @@ class ComOffsetEstimator:
         if not np.all(np.isfinite(g)) or self.filter.n_updates == 0:
             return ComOffsetEstimate(self.grs_ids, np.full(n_d, np.nan), nan, nan, nan, False, self.t_last_s,
                                      self.filter.n_updates, float("nan"), self.validator.count_summary())
-        beta, cov, ok = self.solve(g)
+        # the (beta, x0) system at g, its solution and the corrected information: computed once here (they
+        # are deterministic: the same numbers as computing each again where it is used)
+        system = self._beta_system(g)
+        beta, cov, ok = self._solve_system(g, system)
         if not ok:
             return ComOffsetEstimate(self.grs_ids, np.full(n_d, np.nan), nan, nan, nan, False, self.t_last_s,
                                      self.filter.n_updates, float("nan"), self.validator.count_summary())
-        jac = self.jacobian(g)
+        info_all = self.corrected_information()
+        jac = self._jacobian(system, beta, cov, info_all)
         cov_noise = cov[:n_d, :n_d]
         cov_total = cov_noise + jac @ p_g @ jac.T
-        info, _, a_xx, a_yy = self._beta_system(g)
+        info, _, a_xx, a_yy = system
         g_joint = cov_gd = cov_gg = None
         n_g = self.model.n_g
         if self.options.joint and np.all(np.isfinite(p_g)) and np.all(np.linalg.eigvalsh(p_g) > 0.0):
-            joint = solve_joint(self.model, self.corrected_information(), g, p_g, beta)
+            joint = solve_joint(self.model, info_all, g, p_g, beta)
             beta = joint.beta
             g_joint = joint.g
             cov_total = joint.covariance[n_g:n_g + n_d, n_g:n_g + n_d]
@@ -339,8 +356,10 @@ class ComOffsetEstimator:
                 rejections.append((f"grs{gid}", str(check.reason)))
                 continue
             i = self.grs_ids.index(int(gid))
-            sums[0, i] = linear_sums(check.value)
-            diffs[0, i] = angular_differences(check.value)
+            # instrument.linear_sums and angular_differences of one readout: the same numbers, without np.stack
+            v = check.value
+            sums[0, i] = v[0::2] + v[1::2]
+            diffs[0, i] = (v[0::2] - v[1::2])[_ANGULAR_ORDER]
             rows[3 * i:3 * i + 3] = True
         if not np.any(rows):
             return ComOffsetStepReport(float(t_s), float("nan"), False, tuple(rejections))
