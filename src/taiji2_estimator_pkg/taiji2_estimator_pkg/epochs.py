@@ -126,14 +126,16 @@ class EpochAssembler:
 
     def _ready(self) -> list[Epoch]:
         """The epochs every stream has delivered or passed, or that wait only for dead streams (or overflow)."""
-        dead = self._dead()
+        dead: set[str] | None = None  # asked for only where an epoch waits (releasing changes no count)
         released: list[Epoch] = []
         for t_ns in sorted(self._pending):
             epoch = self._pending[t_ns]
             waiting = [s for s in self.streams if s not in epoch.samples and self._latest[s] < t_ns]
-            overflow = len(self._pending) > self.max_pending
-            if waiting and not overflow and not all(s in dead for s in waiting):
-                break
+            if waiting and not len(self._pending) > self.max_pending:
+                if dead is None:
+                    dead = self._dead()
+                if not all(s in dead for s in waiting):
+                    break
             released.append(self._release(t_ns))
         return released
 
