@@ -9,6 +9,8 @@ contract's time.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .definition import CUC_FINE_OCTETS, CUC_PFIELD
@@ -44,8 +46,11 @@ def cuc_encode_ns(onboard_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def cuc_decode_ns(coarse: np.ndarray, fine: np.ndarray) -> np.ndarray:
     """Onboard times [ns, int64, nearest] of coarse and fine counts (vectorised, exact)."""
-    coarse = np.asarray(coarse, dtype=np.int64)
-    fine = np.asarray(fine, dtype=np.int64)
+    return _decode(np.asarray(coarse, dtype=np.int64), np.asarray(fine, dtype=np.int64))
+
+
+def _decode(coarse: Any, fine: Any) -> Any:
+    """Nearest ns of coarse and fine counts: int64 arrays or Python ints alike (exact in both: < 2**63)."""
     return coarse * _NS + ((fine * _NS + (1 << (_FINE_BITS - 1))) >> _FINE_BITS)
 
 
@@ -71,6 +76,5 @@ def cuc_unpack_ns(field: bytes) -> int:
     """
     if len(field) < 8 or field[0] != CUC_PFIELD:
         raise CucError(f"not a CUC time field with P-field 0x{CUC_PFIELD:02X}: {bytes(field[:8]).hex()}")
-    coarse = int.from_bytes(field[1:5], "big")
-    fine = int.from_bytes(field[5:8], "big")
-    return int(cuc_decode_ns(np.array([coarse]), np.array([fine]))[0])
+    # Python integers: one packet's time without numpy's per-call cost (the ground decodes every packet)
+    return _decode(int.from_bytes(field[1:5], "big"), int.from_bytes(field[5:8], "big"))

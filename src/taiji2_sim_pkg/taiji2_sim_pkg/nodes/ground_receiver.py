@@ -77,8 +77,13 @@ class GroundReceiver(rclpy.node.Node):
             self._ground_ns = max(self._ground_ns, int(msg.times_ns[-1]))
         through = int(msg.transmitted_through_ns)
         released = self._rx.finish() if msg.end_of_data else self._rx.release(through if through >= 0 else None)
-        for r in released:
-            self._publish_sample(r)
+        if released:
+            # the contract stamps of the whole burst in one call (numpy's per-call cost, per packet, was a
+            # tenth of this node's CPU)
+            stamps = self._correlation.to_contract_ns(np.array([r.sample.onboard_ns for r in released],
+                                                                dtype=np.int64))
+            for r, t_ns in zip(released, stamps.tolist(), strict=True):
+                self._publish_sample(r, t_ns)
         self._ended = bool(msg.end_of_data)
         self._publish_reception()
 
@@ -96,11 +101,11 @@ class GroundReceiver(rclpy.node.Node):
                                   "ground_s": receive_ns / _NS, "failure_code": r.failure_code,
                                   "refused": r.refused})
 
-    def _publish_sample(self, r: ReleasedSample) -> None:
+    def _publish_sample(self, r: ReleasedSample, t_ns: int) -> None:
+        """Publish one released sample on its contract topic, stamped ``t_ns`` (contract time [ns])."""
         s = r.sample
         name = s.stream.name
-        v = [float(x) for x in s.values]
-        t_ns = int(self._correlation.to_contract_ns(np.array([s.onboard_ns], dtype=np.int64))[0])
+        v = s.values.tolist()
         m = messages
         if name == "star_tracker":
             msg = m.taiji2_msgs.StarTracker()
