@@ -66,15 +66,15 @@ ST, TORQUE, ANG_DIFF, LIN_COMMON, LIN_DIFF = (slice(3 * i, 3 * i + 3) for i in r
 WRAP_SAMPLES = {"st": 2, "lin_common": 1}
 """Leading samples of the channels with memory that the fit frees (impulse columns)."""
 
-STARTUP_TIME_SCALE_S = 10.0
+STARTUP_TIME_SCALE_S = 5.0
 """Time scale a [s] of the GRS start-up transient basis (:func:`startup_function`)."""
 
-STARTUP_ORDER = 12
+STARTUP_ORDER = 8
 """Laguerre functions per GRS angular readout in the start-up transient (:func:`startup_function`)."""
 
-STARTUP_SUPPORT_S = 1300.0
+STARTUP_SUPPORT_S = 550.0
 """Time after the first sample beyond which the start-up functions are set to zero [s] (every one of
-them is below 1e-12 of its unit peak after 1242 s)."""
+them is below 1e-12 of its unit peak after 510 s)."""
 
 TIMING_REACH_S = 0.5
 """Largest delay change [s] the timing candidates consider: the torque channel is set to zero over
@@ -390,10 +390,13 @@ def startup_function(order: int, n: int, dt_s: float) -> np.ndarray:
     A GRS readout's free response from its initial state (the readout electronics settling after
     switch-on, a test mass re-centred by its suspension loop at the start of the record) is a sum of
     damped exponentials of its own time constants. The first :data:`STARTUP_ORDER` functions span
-    such settling for time constants from ~3 s to ~100 s (a = :data:`STARTUP_TIME_SCALE_S`: of an
-    exponential of 3 s / 30 s / 100 s, 7e-4 / 7e-15 / 6e-5 of its power lies outside the span) and
-    fall below 1e-3 of their peak within ~11 min (zero after :data:`STARTUP_SUPPORT_S`); a lightly
-    damped oscillation lasting minutes is only partly absorbed and stays visible.
+    such settling for time constants from ~3 s to ~60 s (a = :data:`STARTUP_TIME_SCALE_S`: of an
+    exponential of 3 s / 10 s / 30 s / 60 s, 5e-5 / 2e-15 / 2e-5 / 5e-3 of its power lies outside
+    the span), whose power lies at 0.003-0.05 Hz, and fall below 1e-3 of their peak within ~4 min
+    (zero after :data:`STARTUP_SUPPORT_S`). Slower settling is mostly absorbed by the channel
+    trends; a lightly damped oscillation lasting minutes is only partly absorbed and stays visible.
+    Few functions on a short support, because they cost information: an onset scanned inside the
+    first minutes of a record shares it with them.
     """
     support = min(n, math.ceil(STARTUP_SUPPORT_S / dt_s))
     out = np.zeros(n)
