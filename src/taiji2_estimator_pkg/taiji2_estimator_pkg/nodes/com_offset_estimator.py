@@ -26,6 +26,13 @@ from taiji2_runtime.ros import messages
 from taiji2_runtime.threads import limit_blas_threads
 
 GRS_IDS = (1, 2)
+GATE_SCALE_FACTOR_MIN_FRACTION = 0.8
+"""The pre-fit gate of an epoch uses the received scale factors only if they were estimated from at least
+this fraction of the data span the epoch closes (their stamp against the epoch's, both from the first
+sample); older ones leave the epoch ungated. A replay at full speed feeds the raw data far ahead of the
+scale-factor estimator (G of 115 s gating an epoch at 413 s: NIS 40.7, a false rejection in 1 replay of
+4), so the gate's decisions would depend on how fast each process ran; G's error shrinks as 1/sqrt(span),
+so G from 80 % of the span is within 12 % of the current one's accuracy."""
 STREAMS = ("grs1", "grs2")
 STREAMS_PAPER = ("star_tracker", "grs1", "grs2")  # the paper method builds A~ from the star tracker
 
@@ -48,6 +55,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         self.history: list[tuple[float, np.ndarray | None, np.ndarray]] = []  # paper method only
         self.last_stamp_ns = -1  # stamp of the last published estimate
         self.last_nis = float("nan")
+        self.ungated_stale = 0  # epochs not gated: the scale factors received were stale for them
         resumed = self.resume()
         if resumed is not None:
             self.last_t_ns = resumed
@@ -132,7 +140,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
             try:
                 report = self.estimator.update(epoch.t_ns / 1e9, voltages,
                                                self.omega if np.all(np.isfinite(self.omega)) else None,
-                                               scale_factors=self.scale_factors)
+                                               scale_factors=self._gate_scale_factors(epoch.t_ns))
             except Exception as exc:  # never crash the graph on one epoch; keep what is estimated
                 self.node_rejections.add("epoch", f"error:{type(exc).__name__}")
                 self.get_logger().error(f"epoch {epoch.t_ns / 1e9:.1f} s skipped: {exc}", throttle_duration_sec=10.0)
@@ -140,7 +148,8 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
             if np.isfinite(report.nis):
                 self.last_nis = float(report.nis)
             for stream, reason in report.rejections:
-                self.get_logger().warn(f"rejected {stream} at t = {epoch.t_ns / 1e9:.1f} s: {reason}",
+                self.get_logger().warn(f"rejected {stream} at t = {epoch.t_ns / 1e9:.1f} s: {reason} (NIS "
+                                       f"{report.nis:.4g}, scale factors of {self.scale_factors_ns / 1e9:.1f} s)",
                                        throttle_duration_sec=10.0)
         period_s = self.p["paper_batch_period_s"] if self.paper else self.p["publish_period_s"]
         period_ns = int(period_s * 1e9)
@@ -148,6 +157,20 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
             self.publish_estimate(epoch.t_ns)
         if self.checkpoint_due(epoch.t_ns):
             self.save_checkpoint(epoch.t_ns)
+
+    def _gate_scale_factors(self, t_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The scale factors for the gate of the epoch at ``t_ns``, or None (no gate) where they are stale
+        (:data:`GATE_SCALE_FACTOR_MIN_FRACTION`)."""
+        first = self.assembler.first_ns
+        if self.scale_factors is None or first < 0:
+            return self.scale_factors
+        if self.scale_factors_ns - first >= GATE_SCALE_FACTOR_MIN_FRACTION * (t_ns - first):
+            return self.scale_factors
+        self.ungated_stale += 1
+        self.get_logger().info(f"epoch at {t_ns / 1e9:.1f} s not gated: the scale factors received are of "
+                               f"{self.scale_factors_ns / 1e9:.1f} s ({self.ungated_stale} epochs so far)",
+                               throttle_duration_sec=10.0)
+        return None
 
     # -- output --------------------------------------------------------------------------------
     def _current_estimate(self) -> ComOffsetEstimate | None:
