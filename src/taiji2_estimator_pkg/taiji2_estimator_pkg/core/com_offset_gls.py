@@ -22,7 +22,7 @@ from .com_offset_estimate import ComOffsetEstimate
 from .com_offset_model import ComOffsetModel, ComOffsetOptions
 from .epoch_arrays import EpochArrays
 from .gate_estimate import MIN_EIGENVALUE_RATIO, GateEstimate, gate_estimate
-from .instrument import InstrumentModel
+from .instrument import InstrumentModel, angular_differences, linear_sums
 from .joint_com_offset import solve_joint
 from .kalman import chi2_gate
 from .noise_level import BLOCK_S, BandNoise, band_noise, r_adjustment
@@ -32,8 +32,6 @@ from .validation import InputValidator, ValidationOptions, validate_batch
 
 #: at most this many re-estimations with the measured band noise (noise_level.py)
 _NOISE_ITERATIONS = 4
-#: (vx, vy, vz) differences in the order of :func:`~.instrument.angular_differences` (vy, vz, vx)
-_ANGULAR_ORDER = np.array([1, 2, 0])
 
 
 def whitening(engine: TwoStageFilter) -> np.ndarray:
@@ -154,7 +152,8 @@ class ComOffsetEstimator:
 
     def solve(self, g: ArrayLike) -> tuple[np.ndarray, np.ndarray, bool]:
         """(beta (with SRP x0), covariance, determined) for scale factors g."""
-        return self._solve_system(np.asarray(g, dtype=np.float64), self._beta_system(np.asarray(g, dtype=np.float64)))
+        g = np.asarray(g, dtype=np.float64)
+        return self._solve_system(g, self._beta_system(g))
 
     def _solve_system(self, g: np.ndarray, system: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
                       ) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -356,10 +355,8 @@ class ComOffsetEstimator:
                 rejections.append((f"grs{gid}", str(check.reason)))
                 continue
             i = self.grs_ids.index(int(gid))
-            # instrument.linear_sums and angular_differences of one readout: the same numbers, without np.stack
-            v = check.value
-            sums[0, i] = v[0::2] + v[1::2]
-            diffs[0, i] = (v[0::2] - v[1::2])[_ANGULAR_ORDER]
+            sums[0, i] = linear_sums(check.value)
+            diffs[0, i] = angular_differences(check.value)
             rows[3 * i:3 * i + 3] = True
         if not np.any(rows):
             return ComOffsetStepReport(float(t_s), float("nan"), False, tuple(rejections))

@@ -63,16 +63,22 @@ def crf_to_tmrf(grs_id: int, alpha_rad: float) -> np.ndarray:
     return c_1 if grs_id == 1 else c_1.T.copy()
 
 
+#: order of :func:`angular_differences` among the (vx, vy, vz) differences
+_ANGULAR_ORDER = np.array([1, 2, 0])
+
+
 def angular_differences(voltages_v: ArrayLike) -> np.ndarray:
     """The paper's U~ diagonal: ``(vy1 - vy2, vz1 - vz2, vx1 - vx2)`` [V], shape (..., 3)."""
     v = np.asarray(voltages_v, dtype=np.float64)
-    return np.stack((v[..., 2] - v[..., 3], v[..., 4] - v[..., 5], v[..., 0] - v[..., 1]), axis=-1)
+    # (vx, vy, vz) differences in one subtraction, reordered to (vy, vz, vx): no np.stack (the per-epoch
+    # path calls this for every readout)
+    return (v[..., 0::2] - v[..., 1::2])[..., _ANGULAR_ORDER]
 
 
 def linear_sums(voltages_v: ArrayLike) -> np.ndarray:
     """Voltage sums ``(vx1 + vx2, vy1 + vy2, vz1 + vz2)`` [V], shape (..., 3)."""
     v = np.asarray(voltages_v, dtype=np.float64)
-    return np.stack((v[..., 0] + v[..., 1], v[..., 2] + v[..., 3], v[..., 4] + v[..., 5]), axis=-1)
+    return v[..., 0::2] + v[..., 1::2]
 
 
 def linear_scale_factors(angular_scale_factors: ArrayLike, ratio_m: float) -> np.ndarray:
