@@ -14,7 +14,7 @@ from taiji2_estimator_pkg.io import RawBagError, load_raw_bag
 from taiji2_runtime.packets.bag_io import read_bag_streams, write_bag
 from taiji2_runtime.packets.bulk_decode import decode_packet_buffers
 from taiji2_runtime.packets.bulk_encode import encode_stream, encode_streams
-from taiji2_runtime.packets.cuc import cuc_decode_ns, cuc_encode_ns
+from taiji2_runtime.packets.cuc import cuc_decode_ns, cuc_encode, cuc_encode_ns, cuc_pack, cuc_unpack_ns
 from taiji2_runtime.packets.definition import STREAM_BY_APID, STREAMS
 from taiji2_runtime.packets.files import is_packet_path, read_packets
 from taiji2_runtime.packets.packetize import PacketError, decode_packet, encode_packet
@@ -52,6 +52,19 @@ def test_cuc_exact_within_half_resolution():
     assert np.abs(back - ns).max() <= 30  # half of 2**-24 s = 29.8 ns
     with pytest.raises(ValueError, match="outside the CUC range"):
         cuc_encode_ns(np.array([-1]))
+
+
+def test_cuc_one_time_equals_vectorised():
+    """The per-packet encoder (Python integers) gives the counts of the vectorised one, at the rounding edges too."""
+    rng = np.random.default_rng(7)
+    ns = np.concatenate([rng.integers(0, 2**32 * 10**9 - 10**9, 20_000), np.arange(0, 10**9, 999_983),
+                         [0, 29, 30, 31, 999_999_970, 999_999_999]])
+    coarse, fine = cuc_encode_ns(ns)
+    assert [cuc_encode(int(v)) for v in ns] == list(zip(coarse.tolist(), fine.tolist(), strict=True))
+    assert all(abs(cuc_unpack_ns(cuc_pack(int(v))) - int(v)) <= 30 for v in ns[:2000])
+    for bad in (-1, 2**32 * 10**9):
+        with pytest.raises(ValueError, match="outside the CUC range"):
+            cuc_encode(bad)
 
 
 def test_per_sample_codec_equals_bulk_and_names_defects():

@@ -35,13 +35,24 @@ def cuc_encode_ns(onboard_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         If a time is negative or at or beyond 2**32 s.
     """
     ns = np.asarray(onboard_ns, dtype=np.int64)
-    if ns.size and (int(ns.min()) < 0 or int(ns.max()) // _NS > _COARSE_MAX):
-        raise CucError(f"onboard time {int(ns.min()) / 1e9:g}..{int(ns.max()) / 1e9:g} s is outside the CUC range "
+    if ns.size:
+        _check_range(int(ns.min()), int(ns.max()))
+    coarse, fine = _encode(ns)
+    return coarse.astype(np.int64), fine.astype(np.int64)
+
+
+def _check_range(first_ns: int, last_ns: int) -> None:
+    if first_ns < 0 or last_ns // _NS > _COARSE_MAX:
+        raise CucError(f"onboard time {first_ns / 1e9:g}..{last_ns / 1e9:g} s is outside the CUC range "
                        f"0..2**32 s of the onboard epoch (set the time correlation's offset)")
-    coarse, rem = np.divmod(ns, _NS)
+
+
+def _encode(ns: Any) -> tuple[Any, Any]:
+    """Coarse and fine counts of ns: int64 arrays or Python ints alike (exact in both)."""
+    coarse, rem = divmod(ns, _NS)
     fine = ((rem << _FINE_BITS) + _NS // 2) // _NS  # nearest count; rem < 1e9 so rem << 24 < 2**54
     carry = fine >> _FINE_BITS
-    return (coarse + carry).astype(np.int64), (fine & ((1 << _FINE_BITS) - 1)).astype(np.int64)
+    return coarse + carry, fine & ((1 << _FINE_BITS) - 1)
 
 
 def cuc_decode_ns(coarse: np.ndarray, fine: np.ndarray) -> np.ndarray:
@@ -55,9 +66,11 @@ def _decode(coarse: Any, fine: Any) -> Any:
 
 
 def cuc_encode(onboard_ns: int) -> tuple[int, int]:
-    """Coarse and fine counts of one onboard time [ns]."""
-    coarse, fine = cuc_encode_ns(np.array([onboard_ns]))
-    return int(coarse[0]), int(fine[0])
+    """Coarse and fine counts of one onboard time [ns] (Python integers: the onboard encodes every packet,
+    and numpy's per-call cost exceeds this arithmetic; the same counts as :func:`cuc_encode_ns`)."""
+    ns = int(onboard_ns)
+    _check_range(ns, ns)
+    return _encode(ns)
 
 
 def cuc_pack(onboard_ns: int) -> bytes:

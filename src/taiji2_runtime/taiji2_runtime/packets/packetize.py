@@ -79,12 +79,14 @@ def encode_packet(stream: StreamDefinition, seq_count: int, onboard_ns: int, val
     values : array_like
         ``len(stream.fields)`` values in the contract's units.
     """
-    values = np.asarray(values, dtype=np.float64).reshape(-1)
-    if values.shape[0] != len(stream.fields):
-        raise ValueError(f"{stream.name}: {len(stream.fields)} values expected, got {values.shape[0]}")
+    # Python floats packed by struct: one sample's values without numpy's per-call cost (the same octets
+    # as a big-endian float64 array)
+    values = [float(v) for v in (values.reshape(-1) if isinstance(values, np.ndarray) else values)]
+    if len(values) != len(stream.fields):
+        raise ValueError(f"{stream.name}: {len(stream.fields)} values expected, got {len(values)}")
     header = SpacePacketHeader(PacketType.TM, stream.apid, seq_count % SEQ_MODULO, stream.data_length,
                                sec_header_flag=True, seq_flags=SequenceFlags.UNSEGMENTED)
-    body = header.pack() + cuc_pack(int(onboard_ns)) + values.astype(">f8").tobytes()
+    body = header.pack() + cuc_pack(int(onboard_ns)) + struct.pack(f">{len(values)}d", *values)
     return bytes(body) + struct.pack(">H", packet_crc(body))
 
 
