@@ -34,6 +34,18 @@ def add_link_arguments(parser: argparse.ArgumentParser) -> None:
                              "(repeatable; K = 0 is the first pass)")
 
 
+#: wall time [s] between the monitor's checks of the nodes and of the end of the run
+MONITOR_PERIOD_S = 0.1
+
+
+def spin_for(executor: Any, seconds: float) -> None:
+    """Run callbacks for ``seconds`` of wall time: the checks after it (the nodes' exit status, the end, progress)
+    run about ten times a second, not once per message (a 24-h run brings the monitor ~10^6 messages)."""
+    end = time.monotonic() + seconds
+    while (left := end - time.monotonic()) > 0:
+        executor.spin_once(timeout_sec=left)
+
+
 class LinkMonitor:
     """Estimate history, truth, the ground receiver's reception log, the link report, diagnostics."""
 
@@ -272,13 +284,16 @@ def run_link_experiment(args: argparse.Namespace) -> int:
                             *[a for p in commander_maneuver for a in ("-p", p)]],
         "spacecraft_sim": ["run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard",
                            *onboard_remaps, *source, "-p", f"seed:={args.seed}", "-p", f"duration_s:={duration_s}",
-                           "-p", "wait_for_subscribers:=[1, 1, 1]", "-p", "config_overrides:=" + json.dumps(overrides)],
+                           "-p", "wait_for_subscribers:=[1, 1, 1]", "-p", "publish_truth_kinematics:=false",
+                           "-p", "config_overrides:=" + json.dumps(overrides)],
     }
     if args.record:
         commands["recorder"] = ["bag", "record", "-a", "-x", "^/(onboard|taiji2/sim)/", "-o", args.record]
     rclpy.init(args=["taiji2-experiment"])
     node = rclpy.create_node("taiji2_experiment_link")
     monitor = LinkMonitor(node)
+    executor = rclpy.executors.SingleThreadedExecutor()
+    executor.add_node(node)
     procs: dict[str, Any] = {}
     started = time.monotonic()
     status = 0
@@ -291,7 +306,7 @@ def run_link_experiment(args: argparse.Namespace) -> int:
         sf_topics = [f"/taiji2/estimates/grs{g}/scale_factors" for g in (1, 2)]
         d_topics = [f"/taiji2/estimates/grs{g}/com_offset" for g in (1, 2)]
         while True:
-            rclpy.spin_once(node, timeout_sec=0.1)
+            spin_for(executor, MONITOR_PERIOD_S)
             failed = [n for n, p in procs.items()
                       if p.poll() is not None and (p.returncode != 0 or n != "spacecraft_sim")]
             if failed:
@@ -348,6 +363,7 @@ def run_link_experiment(args: argparse.Namespace) -> int:
         status = 1
     finally:
         incomplete = _stop(procs, max(60.0, args.timeout_s - (time.monotonic() - started)))
+        executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
     if incomplete is not None:

@@ -116,6 +116,9 @@ class SpacecraftSim(rclpy.node.Node):
             float_range=(0.0, 86400.0))).value
         self._exit_when_done = dp("exit_when_done", True, _descriptor("shut down after duration_s")).value
         self._publish_truth = dp("publish_truth", True, _descriptor("publish ground truth under /taiji2/sim/")).value
+        truth_kinematics = dp("publish_truth_kinematics", True, _descriptor(
+            "with publish_truth: also the per-step kinematic truth (angular rate and acceleration, attitude, "
+            "applied wrench); false keeps G and d (1 Hz) only")).value
         self._linger_s = dp("linger_s", 1.0, _descriptor(
             "after the end, stay up this long before exiting, so that late subscribers (recorders) still get "
             "the latched provenance [s]", float_range=(0.0, 3600.0))).value
@@ -148,7 +151,7 @@ class SpacecraftSim(rclpy.node.Node):
         self._diag_pub = self.create_publisher(m.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
         self._clock_pub = (self.create_publisher(m.rosgraph_msgs.Clock, "/clock", 10)
                            if self._mode == "accelerated" else None)
-        self._truth = _TruthPublishers(self, reliable_all) if self._publish_truth else None
+        self._truth = _TruthPublishers(self, reliable_all, truth_kinematics) if self._publish_truth else None
         latched = rclpy.qos.QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
         self._provenance_pub = self.create_publisher(m.std_msgs.String, "/taiji2/sim/provenance", latched)
         self._provenance_pub.publish(m.std_msgs.String(data=json.dumps(self._sim.provenance())))
@@ -427,12 +430,16 @@ class SpacecraftSim(rclpy.node.Node):
 class _TruthPublishers:
     """Ground truth for evaluation only (never read by estimators): rate, acceleration, torque, G, d."""
 
-    def __init__(self, node: rclpy.node.Node, qos: Any) -> None:
+    def __init__(self, node: rclpy.node.Node, qos: Any, kinematics: bool = True) -> None:
         g, t = messages.geometry_msgs, messages.taiji2_msgs
-        self._rate = node.create_publisher(g.Vector3Stamped, "/taiji2/sim/angular_rate", qos)
-        self._accel = node.create_publisher(g.Vector3Stamped, "/taiji2/sim/angular_acceleration", qos)
-        self._attitude = node.create_publisher(g.QuaternionStamped, "/taiji2/sim/attitude", qos)
-        self._torque = node.create_publisher(g.WrenchStamped, "/taiji2/sim/applied_wrench", qos)
+        #: the per-step kinematic truth is most of this node's messages (4 of 7 per step): a graph whose
+        #: evaluation needs only G and d (experiment --link) turns it off
+        self._kinematics = kinematics
+        if kinematics:
+            self._rate = node.create_publisher(g.Vector3Stamped, "/taiji2/sim/angular_rate", qos)
+            self._accel = node.create_publisher(g.Vector3Stamped, "/taiji2/sim/angular_acceleration", qos)
+            self._attitude = node.create_publisher(g.QuaternionStamped, "/taiji2/sim/attitude", qos)
+            self._torque = node.create_publisher(g.WrenchStamped, "/taiji2/sim/applied_wrench", qos)
         self._scale = [node.create_publisher(t.ScaleFactorEstimate, f"/taiji2/sim/grs{i}/scale_factors", qos)
                        for i in (1, 2)]
         self._offset = [node.create_publisher(t.ComOffsetEstimate, f"/taiji2/sim/grs{i}/com_offset", qos)
@@ -440,8 +447,26 @@ class _TruthPublishers:
         self._mass_kg = None
 
     def publish(self, sample: SimSample, t_ns: int, step: int) -> None:
-        g, t = messages.geometry_msgs, messages.taiji2_msgs
+        t = messages.taiji2_msgs
         truth = sample.truth
+        if self._kinematics:
+            self._publish_kinematics(truth, t_ns)
+        if step % 10 != 1:
+            return  # scale factors and offsets change slowly: 1 Hz is plenty
+        for i in range(2):
+            sf = t.ScaleFactorEstimate(grs_id=i + 1, method="truth", samples_used=step)
+            _stamp(sf.header, t_ns)
+            sf.header.frame_id = TMRF_FRAMES[i]
+            sf.scale_factors = [float(v) for v in truth.grs_angular_scale_factors[i]]
+            self._scale[i].publish(sf)
+            d = t.ComOffsetEstimate(grs_id=i + 1, method="truth", samples_used=step)
+            _stamp(d.header, t_ns)
+            d.header.frame_id = "crf"
+            d.offset.x, d.offset.y, d.offset.z = (float(v) for v in truth.com_offset_m[i])
+            self._offset[i].publish(d)
+
+    def _publish_kinematics(self, truth: Any, t_ns: int) -> None:
+        g = messages.geometry_msgs
         for pub, vector in ((self._rate, truth.omega_rad_s), (self._accel, truth.omega_dot_rad_s2)):
             msg = g.Vector3Stamped()
             _stamp(msg.header, t_ns)
@@ -462,19 +487,6 @@ class _TruthPublishers:
         # force field carries the spacecraft non-gravitational acceleration [m s^-2] (documented)
         wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z = (float(v) for v in truth.a_sc_m_s2)
         self._torque.publish(wrench)
-        if step % 10 != 1:
-            return  # scale factors and offsets change slowly: 1 Hz is plenty
-        for i in range(2):
-            sf = t.ScaleFactorEstimate(grs_id=i + 1, method="truth", samples_used=step)
-            _stamp(sf.header, t_ns)
-            sf.header.frame_id = TMRF_FRAMES[i]
-            sf.scale_factors = [float(v) for v in truth.grs_angular_scale_factors[i]]
-            self._scale[i].publish(sf)
-            d = t.ComOffsetEstimate(grs_id=i + 1, method="truth", samples_used=step)
-            _stamp(d.header, t_ns)
-            d.header.frame_id = "crf"
-            d.offset.x, d.offset.y, d.offset.z = (float(v) for v in truth.com_offset_m[i])
-            self._offset[i].publish(d)
 
 
 def main(args: Sequence[str] | None = None) -> int:
