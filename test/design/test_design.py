@@ -19,6 +19,8 @@ from taiji2_sim_pkg.core.maneuver_families import (
 )
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands
 
+from support import cpu_bound_processes
+
 
 @pytest.fixture(scope="module")
 def problem() -> DesignProblem:
@@ -187,9 +189,6 @@ def test_same_seed_gives_the_same_design_however_slow_the_clock(problem, monkeyp
 def test_same_seed_gives_the_same_design_beside_cpu_bound_processes(problem):
     """The same, on a really busy machine: two CPU-bound processes beside the second search (one
     BLAS thread, as `taiji2 design` runs it)."""
-    import subprocess
-    import sys
-
     from threadpoolctl import threadpool_limits
 
     from taiji2_estimator_pkg.design.optimize import optimize
@@ -197,13 +196,8 @@ def test_same_seed_gives_the_same_design_beside_cpu_bound_processes(problem):
     search = {"seed": 6, "max_evaluations": 14, "generations": 1, "progress": lambda line: None}
     with threadpool_limits(limits=1, user_api="blas"):
         idle = optimize(problem, "square", 1000.0, Constraints(), **search)
-        hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
-        try:
+        with cpu_bound_processes(2):
             busy = optimize(problem, "square", 1000.0, Constraints(), **search)
-        finally:
-            for hog in hogs:
-                hog.kill()
-                hog.wait()
     assert not idle.truncated and not busy.truncated and idle.evaluations == busy.evaluations == 14
     np.testing.assert_array_equal(busy.x, idle.x)
 

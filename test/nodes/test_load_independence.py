@@ -10,8 +10,6 @@ bit-identical estimates. Waits are bounded by the estimates reaching the last st
 
 from __future__ import annotations
 
-import multiprocessing
-
 import numpy as np
 import pytest
 from test_estimator_nodes import _Feeder
@@ -22,7 +20,7 @@ from taiji2_runtime.ros import messages
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
-from support import spin_until
+from support import cpu_bound_processes, spin_until
 
 N = 1200  # 120 s at 10 Hz
 STALL_AT = 705  # inside a 1-s publish period: only the end-of-data publish puts out an estimate of k - 1
@@ -79,12 +77,6 @@ def _run(context, executor, out, stall: bool) -> tuple[np.ndarray, np.ndarray, d
     return result
 
 
-def _spin_forever() -> None:  # pragma: no cover - runs in a child process
-    x = 0
-    while True:
-        x += 1
-
-
 def test_a_publisher_stalled_mid_tick_changes_nothing(context, executor, experiment):
     g0, d0, r0 = _run(context, executor, experiment, stall=False)
     g1, d1, r1 = _run(context, executor, experiment, stall=True)
@@ -95,15 +87,8 @@ def test_a_publisher_stalled_mid_tick_changes_nothing(context, executor, experim
 
 def test_two_cpu_bound_processes_beside_the_estimators_change_nothing(context, executor, experiment):
     g0, d0, r0 = _run(context, executor, experiment, stall=False)
-    hogs = [multiprocessing.get_context("spawn").Process(target=_spin_forever, daemon=True) for _ in range(2)]
-    for hog in hogs:
-        hog.start()
-    try:
+    with cpu_bound_processes(2):
         g1, d1, r1 = _run(context, executor, experiment, stall=False)
-    finally:
-        for hog in hogs:
-            hog.terminate()
-            hog.join()
     assert r1 == r0
     np.testing.assert_array_equal(g1, g0)
     np.testing.assert_array_equal(d1, d0)
