@@ -29,6 +29,13 @@ def python_subprocess_env() -> dict[str, str]:
     return env
 
 
+def run_taiji2(*argv: str, cwd: str | None = None, env: dict[str, str] | None = None,
+               timeout: float = 120) -> subprocess.CompletedProcess:
+    """``taiji2 ARGV`` in a subprocess of this interpreter; its output captured as text."""
+    return subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", *argv], env=env or python_subprocess_env(),
+                          capture_output=True, text=True, timeout=timeout, cwd=cwd)
+
+
 @contextlib.contextmanager
 def cpu_bound_processes(n: int = 2) -> Iterator[list[subprocess.Popen]]:
     """``n`` CPU-bound processes (busy loops) for the duration of the block: the load of a user's other jobs."""

@@ -17,14 +17,13 @@ import subprocess
 import numpy as np
 import yaml
 
-from support import PYTHON, python_subprocess_env
+from support import run_taiji2
 
 ONSET_S = 1800.0
 
 
 def _taiji2(*argv: str) -> subprocess.CompletedProcess:
-    return subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", *argv], env=python_subprocess_env(),
-                          capture_output=True, text=True, timeout=300)
+    return run_taiji2(*argv, timeout=300)
 
 
 def test_write_config_then_diagnose_and_calibrate_with_it(tmp_path):

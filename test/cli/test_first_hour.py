@@ -14,13 +14,9 @@ import subprocess
 import numpy as np
 import pytest
 
-from support import PYTHON, REPO, python_subprocess_env
+from support import REPO, python_subprocess_env, run_taiji2
 
-
-def _taiji2(*argv: str, cwd: str | None = None, env: dict[str, str] | None = None,
-            timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", *argv], env=env or python_subprocess_env(),
-                          capture_output=True, text=True, timeout=timeout, cwd=cwd)
+_taiji2 = run_taiji2
 
 
 def _one_error_line(proc: subprocess.CompletedProcess) -> str:

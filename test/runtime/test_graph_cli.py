@@ -6,14 +6,13 @@ import signal
 import subprocess
 import time
 
-from support import PYTHON, python_subprocess_env
+from support import PYTHON, python_subprocess_env, run_taiji2
 
 NODE = "/graph_cli_probe"
 
 
 def _taiji2(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", *args], env=python_subprocess_env(),
-                          capture_output=True, text=True, timeout=60)
+    return run_taiji2(*args, timeout=60)
 
 
 def test_node_list_and_param_get_set_reach_an_embedded_node():
