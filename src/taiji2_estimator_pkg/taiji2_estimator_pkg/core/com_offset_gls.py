@@ -182,17 +182,24 @@ class ComOffsetEstimator:
         """:meth:`jacobian` from the :meth:`_beta_system` ``system`` at g, its solution (``beta``, ``cov``) and
         :meth:`corrected_information` (computed once by :meth:`estimate`)."""
         model = self.model
+        n_d = model.n_d
         _, _, a_xx, a_yy = system
-        jac = np.zeros((model.n_d, model.n_g))
+        # dA_x/dG_j is a selection E_j (ones at rows col_xj[j], columns :n_d) and da_y/dG_j the unit vector e_j
+        # (data column j), so with M = I A_x and m = I a_y:
+        #   d_info_j = E_j^T M + M^T E_j,   d_vec_j = E_j^T m + A_x^T I e_j
+        # and d_info_j beta = E_j^T (M beta) + M[col_xj[j]]^T beta_d: slices of M and m, no dense E_j
+        m_x = info_all @ a_xx
+        m_y = info_all @ a_yy
+        m_x_beta = m_x @ beta
+        data_x = a_xx.T @ info_all[:, model.col_data]
+        rhs = np.empty((beta.size, model.n_g))
         for j in range(model.n_g):
-            da_x = np.zeros_like(a_xx)
-            da_x[model.col_xj[j], :model.n_d] = np.eye(model.n_d)
-            da_y = np.zeros_like(a_yy)
-            da_y[j] = 1.0
-            d_info = da_x.T @ info_all @ a_xx + a_xx.T @ info_all @ da_x
-            d_vec = da_x.T @ info_all @ a_yy + a_xx.T @ info_all @ da_y
-            jac[:, j] = (cov @ (d_vec - d_info @ beta))[:model.n_d]
-        return jac
+            rows = model.col_xj[j]
+            # d_vec_j - d_info_j beta
+            column = data_x[:, j] - m_x[rows].T @ beta[:n_d]
+            column[:n_d] += m_y[rows] - m_x_beta[rows]
+            rhs[:, j] = column
+        return (cov @ rhs)[:n_d]
 
     def estimate(self, scale_factors: ScaleFactorEstimate | tuple[ArrayLike, ArrayLike]) -> ComOffsetEstimate:
         """Estimate of d for the given scale factors (their covariance is propagated).

@@ -110,7 +110,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
             return  # the scale-factor estimator is not determined yet
         self.scale_factors = (g, cov)
         self.scale_factors_ns = common.stamp_ns(msgs[0].header)
-        if self.last_t_ns >= 0 and min(self.last_t_ns, self.scale_factors_ns) > self.last_stamp_ns:
+        if self.last_t_ns >= 0 and self._stamp_due(self.last_t_ns):
             self.publish_estimate(self.last_t_ns)  # a newer G: d moves with it
 
     def _on_rate(self, msg: Any) -> None:
@@ -151,12 +151,29 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
                 self.get_logger().warn(f"rejected {stream} at t = {epoch.t_ns / 1e9:.1f} s: {reason} (NIS "
                                        f"{report.nis:.4g}, scale factors of {self.scale_factors_ns / 1e9:.1f} s)",
                                        throttle_duration_sec=10.0)
-        period_s = self.p["paper_batch_period_s"] if self.paper else self.p["publish_period_s"]
-        period_ns = int(period_s * 1e9)
-        if self.last_publish_ns < 0 or epoch.t_ns // period_ns > self.last_publish_ns // period_ns:
+        if self._stamp_due(epoch.t_ns):
             self.publish_estimate(epoch.t_ns)
         if self.checkpoint_due(epoch.t_ns):
             self.save_checkpoint(epoch.t_ns)
+
+    def _period_ns(self) -> int:
+        return int((self.p["paper_batch_period_s"] if self.paper else self.p["publish_period_s"]) * 1e9)
+
+    def _stamp_due(self, t_ns: int) -> bool:
+        """Whether the estimate of the data through ``t_ns`` is due: one per publish period of its stamp.
+
+        The stamp is min(data time, scale factors' time) (:meth:`publish_estimate`) and both move it: publishing
+        at each new period of the data *and* at each newer G sent two estimates a period, the second (~1.3 ms of
+        CPU each) mostly within the same second. Until G is known, one per period of the data."""
+        period_ns = self._period_ns()
+        if self.scale_factors is None:
+            return self.last_publish_ns < 0 or t_ns // period_ns > self.last_publish_ns // period_ns
+        return self.last_stamp_ns < 0 or min(t_ns, self.scale_factors_ns) // period_ns > self.last_stamp_ns // period_ns
+
+    def unpublished(self) -> bool:
+        """Data or scale factors newer than the last published estimate (published at the end of data)."""
+        return super().unpublished() or (self.last_t_ns >= 0 and self.scale_factors is not None
+                                         and min(self.last_t_ns, self.scale_factors_ns) > self.last_stamp_ns)
 
     def _gate_scale_factors(self, t_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The scale factors for the gate of the epoch at ``t_ns``, or None (no gate) where they are stale

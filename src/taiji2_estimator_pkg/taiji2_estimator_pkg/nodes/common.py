@@ -242,11 +242,15 @@ class EstimatorNode(rclpy.node.Node):
         Estimates go out at the first epoch of each publish period, so without this a run ending
         inside a period (a 6421.8-s run with 1-s periods) would never publish its last epochs.
         """
-        if self.last_t_ns <= self.last_publish_ns:
+        if not self.unpublished():
             return
         if time.monotonic() - self.last_data_wall < self.p["max_stream_silence_s"]:
             return
         self.publish_estimate(self.last_t_ns)
+
+    def unpublished(self) -> bool:
+        """Epochs newer than the last published estimate."""
+        return self.last_t_ns > self.last_publish_ns
 
     def streams(self) -> Sequence[str]:
         """The raw streams this estimator aligns (may depend on ``self.p``)."""
