@@ -118,24 +118,21 @@ class EpochAssembler:
         self._pending.setdefault(t_ns, Epoch(t_ns)).samples[stream] = payload
         return self._ready()
 
-    def _dead(self) -> set[str]:
-        """Streams from which nothing arrived while another delivered ``max_lag_s`` worth of messages."""
-        return {s for s in self.streams
-                if max(self._received[o] - self._received_at_last[s][o] for o in self.streams)
-                >= self.max_lag_messages}
+    def _is_dead(self, stream: str) -> bool:
+        """Nothing arrived from ``stream`` while another stream delivered ``max_lag_s`` worth of messages."""
+        at_last = self._received_at_last[stream]
+        return any(self._received[o] - at_last[o] >= self.max_lag_messages for o in self.streams)
 
     def _ready(self) -> list[Epoch]:
         """The epochs every stream has delivered or passed, or that wait only for dead streams (or overflow)."""
-        dead: set[str] | None = None  # asked for only where an epoch waits (releasing changes no count)
         released: list[Epoch] = []
         for t_ns in sorted(self._pending):
             epoch = self._pending[t_ns]
             waiting = [s for s in self.streams if s not in epoch.samples and self._latest[s] < t_ns]
-            if waiting and not len(self._pending) > self.max_pending:
-                if dead is None:
-                    dead = self._dead()
-                if not all(s in dead for s in waiting):
-                    break
+            # an epoch usually waits for a live stream (the first of its samples has just arrived): the first
+            # live one found ends the test (releasing changes no count, so the answer holds for later epochs)
+            if waiting and not len(self._pending) > self.max_pending and not all(map(self._is_dead, waiting)):
+                break
             released.append(self._release(t_ns))
         return released
 
