@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -287,3 +288,9 @@ def test_a_run_ending_inside_a_publish_period_publishes_its_last_epoch(context, 
                       and d_estimates and stamp(d_estimates[-1]) == last_ns, timeout_s=60)
     assert feeder.estimates[-1].samples_used == last + 1  # every epoch is in it
     assert d_estimates[-1].samples_used == last + 1
+    # at most one d per publish period of its stamp min(data, G), before the end-of-data one: a new period of the
+    # data and a newer G both move the stamp, and publishing on each sent up to two d a period, most with the
+    # stamp of the one before (here, fed faster than real time, G arrives in bursts: before, 208 d with stamps
+    # in 30 periods, 6-8 d in most of them; one each now)
+    periods = [stamp(m) // 10**9 for m in d_estimates[:-1]]
+    assert len(periods) >= 10 and all(a < b for a, b in itertools.pairwise(periods)), periods
