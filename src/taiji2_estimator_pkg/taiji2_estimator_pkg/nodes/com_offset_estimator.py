@@ -167,13 +167,19 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         CPU each) mostly within the same second. Until G is known, one per period of the data."""
         period_ns = self._period_ns()
         if self.scale_factors is None:
-            return self.last_publish_ns < 0 or t_ns // period_ns > self.last_publish_ns // period_ns
-        return self.last_stamp_ns < 0 or min(t_ns, self.scale_factors_ns) // period_ns > self.last_stamp_ns // period_ns
+            stamp, last = t_ns, self.last_publish_ns
+        else:
+            stamp, last = self._stamp_ns(t_ns), self.last_stamp_ns
+        return last < 0 or stamp // period_ns > last // period_ns
+
+    def _stamp_ns(self, t_ns: int) -> int:
+        """Stamp of the estimate of the data through ``t_ns`` with the latest scale factors: the earlier of the two."""
+        return min(t_ns, self.scale_factors_ns)
 
     def unpublished(self) -> bool:
         """Data or scale factors newer than the last published estimate (published at the end of data)."""
         return super().unpublished() or (self.last_t_ns >= 0 and self.scale_factors is not None
-                                         and min(self.last_t_ns, self.scale_factors_ns) > self.last_stamp_ns)
+                                         and self._stamp_ns(self.last_t_ns) > self.last_stamp_ns)
 
     def _gate_scale_factors(self, t_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The scale factors for the gate of the epoch at ``t_ns``, or None (no gate) where they are stale
@@ -219,7 +225,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         if estimate is None:
             return
         self.last_estimate = estimate
-        stamp = min(t_ns, self.scale_factors_ns)
+        stamp = self._stamp_ns(t_ns)
         self.last_stamp_ns = stamp
         rejected = common.total(self.rejection_counts())
         t = messages.taiji2_msgs
