@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from rosbags.rosbag2 import Reader
 
+from taiji2_estimator_pkg.cli.experiment_link import estimate_stamps_ns
 from taiji2_runtime.interfaces import typestore
 from taiji2_runtime.ros import messages, rclpy
 
@@ -266,7 +267,8 @@ class Graph:
 
     def stamp_s(self, topic: str) -> float:
         m = self.latest.get(topic)
-        return -1.0 if m is None else m.header.stamp.sec + m.header.stamp.nanosec / _NS
+        # an estimate is as far as all its inputs: d's data and the G it used (its scale_factors_stamp)
+        return -1.0 if m is None else min(estimate_stamps_ns(m)) / _NS
 
     def progress_s(self) -> float:
         """Simulated time every estimate has reached [s] (-1 before the first of each)."""

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
+from taiji2_estimator_pkg.cli.experiment_link import estimate_stamps_ns
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.parameters import flatten
 from taiji2_estimator_pkg.core.scale_factor import ScaleFactorEstimator
@@ -284,13 +285,22 @@ def test_a_run_ending_inside_a_publish_period_publishes_its_last_epoch(context, 
     def stamp(msg) -> int:
         return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
 
+    # the last d: of the last GRS data with the last G (which may come after the last GRS sample)
     assert spin_until(executor, lambda: feeder.estimates and stamp(feeder.estimates[-1]) == last_ns
-                      and d_estimates and stamp(d_estimates[-1]) == last_ns, timeout_s=60)
+                      and d_estimates and estimate_stamps_ns(d_estimates[-1]) == (last_ns, last_ns), timeout_s=60)
     assert feeder.estimates[-1].samples_used == last + 1  # every epoch is in it
     assert d_estimates[-1].samples_used == last + 1
-    # at most one d per publish period of its stamp min(data, G), before the end-of-data one: a new period of the
-    # data and a newer G both move the stamp, and publishing on each sent up to two d a period, most with the
-    # stamp of the one before (here, fed faster than real time, G arrives in bursts: before, 208 d with stamps
-    # in 30 periods, 6-8 d in most of them; one each now)
-    periods = [stamp(m) // 10**9 for m in d_estimates[:-1]]
+    # at most one d per publish period of its data, before those at the end of data: publishing at each newer G
+    # too sent up to two d a period (here, fed faster than real time, G arrives in bursts: before, 208 d with
+    # stamps in 30 periods, 6-8 d in most of them; one each now)
+    periods = [stamp(m) // 10**9 for m in d_estimates if stamp(m) < last_ns]
     assert len(periods) >= 10 and all(a < b for a, b in itertools.pairwise(periods)), periods
+    # each d says which data it rests on: its stamp is that of its last GRS sample (samples_used counts the
+    # epochs up to it) and scale_factors_stamp that of a G the scale-factor estimator published. (Stamped
+    # min(data, G) before: here G lags, and d stamped with G's time had used GRS data beyond it.)
+    t_ns = np.round(out.t_s[:last + 1] * 1e9).astype(np.int64)
+    g_stamps = {stamp(m) for m in feeder.estimates}
+    for m in d_estimates:
+        data_ns, g_ns = estimate_stamps_ns(m)
+        assert m.samples_used == np.count_nonzero(t_ns <= data_ns), (data_ns, m.samples_used)
+        assert g_ns in g_stamps, g_ns

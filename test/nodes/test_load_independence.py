@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from test_estimator_nodes import _Feeder
 
+from taiji2_estimator_pkg.cli.experiment_link import estimate_stamps_ns
 from taiji2_estimator_pkg.nodes.com_offset_estimator import ComOffsetEstimatorNode
 from taiji2_estimator_pkg.nodes.scale_factor_estimator import ScaleFactorEstimatorNode
 from taiji2_runtime.ros import messages
@@ -64,8 +65,9 @@ def _run(context, executor, out, stall: bool) -> tuple[np.ndarray, np.ndarray, d
         if k % 100 == 0:
             executor.spin_once(timeout_sec=0.0)
     last_ns = round(out.t_s[N - 1] * 1e9)
+    # the last d: of the last GRS data with the last G
     assert spin_until(executor, lambda: feeder.estimates and _stamp_ns(feeder.estimates[-1]) == last_ns
-                      and d_estimates and _stamp_ns(d_estimates[-1]) == last_ns, timeout_s=120)
+                      and d_estimates and estimate_stamps_ns(d_estimates[-1]) == (last_ns, last_ns), timeout_s=120)
     g = np.array(feeder.estimates[-1].scale_factors)
     d = d_estimates[-1]
     result = (g, np.array([d.offset.x, d.offset.y, d.offset.z]),

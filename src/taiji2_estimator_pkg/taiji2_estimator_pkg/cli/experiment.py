@@ -83,9 +83,13 @@ class _Monitor:
             if not status.message.startswith("starved"):
                 self.diagnostics[status.name] = status
 
-    def stamp_ns(self, topic: str) -> int:
+    def through_ns(self, topic: str) -> int:
+        """Time through which the latest estimate on ``topic`` rests on all its inputs [ns]: the earlier of its data
+        and scale factors stamps (:func:`~taiji2_estimator_pkg.cli.experiment_link.estimate_stamps_ns`); -1: none."""
+        from taiji2_estimator_pkg.cli.experiment_link import estimate_stamps_ns
+
         msg = self.latest.get(topic)
-        return -1 if msg is None else msg.header.stamp.sec * _NS + msg.header.stamp.nanosec
+        return -1 if msg is None else min(estimate_stamps_ns(msg))
 
 
 def _spawn(argv: list[str], log: Path) -> subprocess.Popen:
@@ -249,7 +253,7 @@ def _run(args: argparse.Namespace, plan: Any, domain: int | None, temporary: boo
         final_ns = n_steps * 100_000_000
         topics = [f"/taiji2/estimates/grs{g}/{k}" for g in (1, 2) for k in ("scale_factors", "com_offset")]
         topics.append("/taiji2/estimates/com_offset_difference")
-        stamps, moved = [monitor.stamp_ns(t) for t in topics], time.monotonic()
+        stamps, moved = [monitor.through_ns(t) for t in topics], time.monotonic()
         while True:
             rclpy.spin_once(node, timeout_sec=0.1)
             # the simulator exits (0) when done; every other node runs until stopped
@@ -257,9 +261,9 @@ def _run(args: argparse.Namespace, plan: Any, domain: int | None, temporary: boo
                       if p.poll() is not None and (p.returncode != 0 or n != "spacecraft_sim")]
             if failed:
                 raise RuntimeError(_node_failure(failed[0], procs[failed[0]], out / f"{failed[0]}.log"))
-            if all(monitor.stamp_ns(t) >= final_ns for t in topics):
+            if all(monitor.through_ns(t) >= final_ns for t in topics):
                 break
-            now = [monitor.stamp_ns(t) for t in topics]
+            now = [monitor.through_ns(t) for t in topics]
             if now != stamps or procs["spacecraft_sim"].poll() is None:
                 stamps, moved = now, time.monotonic()
             elif time.monotonic() - moved > _STALL_S:
@@ -271,7 +275,7 @@ def _run(args: argparse.Namespace, plan: Any, domain: int | None, temporary: boo
                 raise TimeoutError(f"experiment did not finish within {args.timeout_s:g} s wall time")
             if time.monotonic() - last_progress > 5.0:
                 last_progress = time.monotonic()
-                done = max(0, min(monitor.stamp_ns(t) for t in topics)) / final_ns
+                done = max(0, min(monitor.through_ns(t) for t in topics)) / final_ns
                 print(f"  {100 * done:5.1f} % of {args.duration_s:g} s simulated "
                       f"({time.monotonic() - started:.0f} s wall)", file=sys.stderr)
         elapsed = time.monotonic() - started

@@ -34,6 +34,15 @@ def add_link_arguments(parser: argparse.ArgumentParser) -> None:
                              "(repeatable; K = 0 is the first pass)")
 
 
+def estimate_stamps_ns(msg: Any) -> tuple[int, int]:
+    """(data, scale factors) stamps [ns] of an estimate message: for a ComOffsetEstimate the time of its last GRS
+    sample and the stamp of the G it used (``scale_factors_stamp``); for a ScaleFactorEstimate its stamp twice.
+    The estimate rests on data up to the later of the two."""
+    data_ns = msg.header.stamp.sec * _NS + msg.header.stamp.nanosec
+    g = getattr(msg, "scale_factors_stamp", None)
+    return data_ns, data_ns if g is None else g.sec * _NS + g.nanosec
+
+
 #: wall time [s] between the monitor's checks of the nodes and of the end of the run
 MONITOR_PERIOD_S = 0.1
 
@@ -84,8 +93,7 @@ class LinkMonitor:
                 value = list(msg.scale_factors) if hasattr(msg, "scale_factors") else [msg.offset.x, msg.offset.y,
                                                                                         msg.offset.z]
                 sigma = [max(float(msg.covariance[4 * k]), 0.0) ** 0.5 for k in range(3)]
-                self.history.setdefault(topic, []).append(
-                    (msg.header.stamp.sec * _NS + msg.header.stamp.nanosec, value, sigma))
+                self.history.setdefault(topic, []).append((max(estimate_stamps_ns(msg)), value, sigma))
 
         node.create_subscription(cls, topic, on, qos)
 
@@ -100,9 +108,10 @@ class LinkMonitor:
                     name, _, text = part.partition(": ")
                     self.faults_seen[name] = text
 
-    def stamp_ns(self, topic: str) -> int:
+    def stamps_ns(self, topic: str) -> tuple[int, int]:
+        """:func:`estimate_stamps_ns` of the latest estimate on ``topic`` ((-1, -1): none yet)."""
         msg = self.latest.get(topic)
-        return -1 if msg is None else msg.header.stamp.sec * _NS + msg.header.stamp.nanosec
+        return (-1, -1) if msg is None else estimate_stamps_ns(msg)
 
 
 def requirement_times(history: dict[str, list[tuple[int, list[float], list[float]]]],
@@ -317,8 +326,10 @@ def run_link_experiment(args: argparse.Namespace) -> int:
                 through = final["released_through_s"]
                 sf_target = max((v for k, v in through.items() if k != "executed_torque" and v is not None), default=0)
                 d_target = max((through.get(k) or 0 for k in ("grs1", "grs2")), default=0)
-                if (all(monitor.stamp_ns(t) >= sf_target * _NS - 1000 for t in sf_topics)
-                        and all(monitor.stamp_ns(t) >= min(d_target, sf_target) * _NS - 1000 for t in d_topics)):
+                # done when the last estimates rest on all the data: d on the last GRS data *and* the last G
+                if (all(monitor.stamps_ns(t)[0] >= sf_target * _NS - 1000 for t in sf_topics)
+                        and all(data >= d_target * _NS - 1000 and g >= sf_target * _NS - 1000
+                                for data, g in map(monitor.stamps_ns, d_topics))):
                     break
             if time.monotonic() - started > args.timeout_s:
                 raise TimeoutError(f"experiment did not finish within {args.timeout_s:g} s wall time")

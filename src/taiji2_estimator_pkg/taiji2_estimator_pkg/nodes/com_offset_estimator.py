@@ -53,7 +53,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         self.scale_factors_ns = -1
         self.omega = np.full(3, np.nan)
         self.history: list[tuple[float, np.ndarray | None, np.ndarray]] = []  # paper method only
-        self.last_stamp_ns = -1  # stamp of the last published estimate
+        self.published_scale_factors_ns = -1  # stamp of the scale factors the last published estimate used
         self.last_nis = float("nan")
         self.ungated_stale = 0  # epochs not gated: the scale factors received were stale for them
         resumed = self.resume()
@@ -109,9 +109,9 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         if not np.all(np.isfinite(g)):
             return  # the scale-factor estimator is not determined yet
         self.scale_factors = (g, cov)
+        # d moves with G, but is published on the data's schedule (_process), and after the last data with the
+        # newest G (unpublished): publishing at each newer G too sent two estimates a period (~1 ms of CPU each)
         self.scale_factors_ns = common.stamp_ns(msgs[0].header)
-        if self.last_t_ns >= 0 and self._stamp_due(self.last_t_ns):
-            self.publish_estimate(self.last_t_ns)  # a newer G: d moves with it
 
     def _on_rate(self, msg: Any) -> None:
         self.omega = np.array([msg.vector.x, msg.vector.y, msg.vector.z], dtype=np.float64)
@@ -160,26 +160,15 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         return int((self.p["paper_batch_period_s"] if self.paper else self.p["publish_period_s"]) * 1e9)
 
     def _stamp_due(self, t_ns: int) -> bool:
-        """Whether the estimate of the data through ``t_ns`` is due: one per publish period of its stamp.
-
-        The stamp is min(data time, scale factors' time) (:meth:`publish_estimate`) and both move it: publishing
-        at each new period of the data *and* at each newer G sent two estimates a period, the second (~1.3 ms of
-        CPU each) mostly within the same second. Until G is known, one per period of the data."""
+        """Whether the estimate of the data through ``t_ns`` is due: one per publish period of the data."""
         period_ns = self._period_ns()
-        if self.scale_factors is None:
-            stamp, last = t_ns, self.last_publish_ns
-        else:
-            stamp, last = self._stamp_ns(t_ns), self.last_stamp_ns
-        return last < 0 or stamp // period_ns > last // period_ns
-
-    def _stamp_ns(self, t_ns: int) -> int:
-        """Stamp of the estimate of the data through ``t_ns`` with the latest scale factors: the earlier of the two."""
-        return min(t_ns, self.scale_factors_ns)
+        return self.last_publish_ns < 0 or t_ns // period_ns > self.last_publish_ns // period_ns
 
     def unpublished(self) -> bool:
-        """Data or scale factors newer than the last published estimate (published at the end of data)."""
+        """Data or scale factors newer than those of the last published estimate (published at the end of data:
+        a G that arrives after the last GRS sample changes d without moving its stamp)."""
         return super().unpublished() or (self.last_t_ns >= 0 and self.scale_factors is not None
-                                         and self._stamp_ns(self.last_t_ns) > self.last_stamp_ns)
+                                         and self.scale_factors_ns > self.published_scale_factors_ns)
 
     def _gate_scale_factors(self, t_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The scale factors for the gate of the epoch at ``t_ns``, or None (no gate) where they are stale
@@ -210,11 +199,8 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         return self.estimator.process_batch(t, q, v, {1: g[:3], 2: g[3:]})
 
     def publish_estimate(self, t_ns: int) -> None:
-        """Publish d from the data up to ``t_ns`` and the latest scale factors.
-
-        The stamp is the earlier of the two: an estimate is only as current as both the data and
-        the scale factors it was computed with (the scale-factor estimator may lag the GRS data).
-        """
+        """Publish d from the GRS data up to ``t_ns`` (the stamp) and the latest scale factors (their stamp in
+        ``scale_factors_stamp``: the estimate rests on data up to the later of the two)."""
         try:
             estimate = self._current_estimate()
         except Exception as exc:  # keep the last estimate rather than crash
@@ -225,21 +211,21 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         if estimate is None:
             return
         self.last_estimate = estimate
-        stamp = self._stamp_ns(t_ns)
-        self.last_stamp_ns = stamp
+        self.published_scale_factors_ns = self.scale_factors_ns
         rejected = common.total(self.rejection_counts())
         t = messages.taiji2_msgs
         for gid in GRS_IDS:
             d, cov = estimate.of(gid)
-            self.pubs[gid].publish(self._message(t, gid, stamp, d, cov, estimate, rejected))
+            self.pubs[gid].publish(self._message(t, gid, t_ns, d, cov, estimate, rejected))
         diff, diff_cov = estimate.difference()
-        self.diff_pub.publish(self._message(t, 0, stamp, diff, diff_cov, estimate, rejected))
+        self.diff_pub.publish(self._message(t, 0, t_ns, diff, diff_cov, estimate, rejected))
 
     def _message(self, t: Any, gid: int, t_ns: int, d: np.ndarray, cov: np.ndarray, estimate: ComOffsetEstimate,
                  rejected: int) -> Any:
         msg = t.ComOffsetEstimate(grs_id=gid, method=estimate.method)
         common.set_stamp(msg.header, t_ns)
         msg.header.frame_id = "crf"
+        common.set_time(msg.scale_factors_stamp, self.scale_factors_ns)
         msg.offset.x, msg.offset.y, msg.offset.z = (float(v) for v in d)
         msg.covariance = [float(v) for v in np.asarray(cov).ravel()]
         msg.samples_used = int(estimate.n_samples)

@@ -62,12 +62,21 @@ def instrument_from(values: dict[str, Any]) -> InstrumentModel:
     return InstrumentModel.from_layout(values["layout"])
 
 
+def time_ns(time: Any) -> int:
+    """A builtin_interfaces/Time in ns."""
+    return int(time.sec) * _NS + int(time.nanosec)
+
+
+def set_time(time: Any, t_ns: int) -> None:
+    time.sec, time.nanosec = divmod(int(t_ns), _NS)
+
+
 def stamp_ns(header: Any) -> int:
-    return int(header.stamp.sec) * _NS + int(header.stamp.nanosec)
+    return time_ns(header.stamp)
 
 
 def set_stamp(header: Any, t_ns: int) -> None:
-    header.stamp.sec, header.stamp.nanosec = divmod(int(t_ns), _NS)
+    set_time(header.stamp, t_ns)
 
 
 def raw_qos() -> Any:
