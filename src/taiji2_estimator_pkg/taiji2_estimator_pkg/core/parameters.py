@@ -62,7 +62,8 @@ NODE_DEFAULTS: dict[str, dict[str, Any]] = {
                                "starved_after_s": 5.0, "missing_warn_fraction": 0.001},
     "com_offset_estimator": {"publish_period_s": 1.0, "max_stream_lag_s": 10.0, "max_stream_silence_s": 2.0,
                              "starved_after_s": 5.0, "missing_warn_fraction": 0.001,
-                             "use_rate_estimate": False, "paper_batch_period_s": 600.0},
+                             "use_rate_estimate": False, "paper_batch_period_s": 600.0,
+                             "scale_factor_wait_s": 30.0, "max_scale_factor_lag_s": 3600.0},
 }
 """Defaults of the keys only the ROS nodes read (publishing, stream alignment, diagnostics), per node."""
 

@@ -12,6 +12,7 @@ Parameters: ``config/estimators.yaml``.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -20,6 +21,7 @@ import numpy as np
 from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimate, ComOffsetEstimator, PaperComOffsetFilter
 from taiji2_estimator_pkg.core.parameters import com_offset_options, paper_com_offset_options
 from taiji2_estimator_pkg.nodes import common
+from taiji2_estimator_pkg.scale_factor_wait import ScaleFactorWait
 from taiji2_runtime.batched import create_batched_subscription
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages
@@ -48,12 +50,15 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         self.use_rate = self.p["use_rate_estimate"]
         self.estimator = (PaperComOffsetFilter(self.instrument, GRS_IDS, paper_com_offset_options(self.p))
                           if self.paper else ComOffsetEstimator(self.instrument, GRS_IDS, com_offset_options(self.p)))
-        self.scale_factor_msgs: dict[int, Any] = {}
+        #: ScaleFactorEstimate messages waiting for the other GRS's of the same stamp: GRS id -> stamp [ns] -> msg
+        self.scale_factor_msgs: dict[int, dict[int, Any]] = {g: {} for g in GRS_IDS}
         self.scale_factors: tuple[np.ndarray, np.ndarray] | None = None
         self.scale_factors_ns = -1
         self.omega = np.full(3, np.nan)
         self.history: list[tuple[float, np.ndarray | None, np.ndarray]] = []  # paper method only
         self.published_scale_factors_ns = -1  # stamp of the scale factors the last published estimate used
+        self.waiting = ScaleFactorWait()  # epochs held until the scale factors of their period have come
+        self.last_scale_factors_wall = time.monotonic()
         self.last_nis = float("nan")
         self.ungated_stale = 0  # epochs not gated: the scale factors received were stale for them
         resumed = self.resume()
@@ -93,24 +98,41 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
 
     # -- input ---------------------------------------------------------------------------------
     def _on_scale_factors(self, msg: Any) -> None:
+        """Pair the two GRS's estimates by stamp, whichever comes first: in a burst one topic's messages can
+        arrive several stamps ahead of the other's (taking only a pair that happened to arrive together, G
+        stayed at one stamp while the data moved 100 s on)."""
         if msg.grs_id not in GRS_IDS:
             self.node_rejections.add("scale_factors", "grs_id_mismatch")
             return
-        self.scale_factor_msgs[int(msg.grs_id)] = msg
-        msgs = [self.scale_factor_msgs.get(g) for g in GRS_IDS]
-        if any(m is None for m in msgs) or common.stamp_ns(msgs[0].header) != common.stamp_ns(msgs[1].header):
+        self.last_scale_factors_wall = time.monotonic()
+        gid, t_ns = int(msg.grs_id), common.stamp_ns(msg.header)
+        other = self.scale_factor_msgs[GRS_IDS[1] if gid == GRS_IDS[0] else GRS_IDS[0]]
+        for stale in [s for s in other if s < t_ns]:  # each topic comes in stamp order: never paired now
+            del other[stale]
+        if t_ns not in other:
+            self.scale_factor_msgs[gid][t_ns] = msg
             return
+        pair = {gid: msg, GRS_IDS[1] if gid == GRS_IDS[0] else GRS_IDS[0]: other.pop(t_ns)}
+        self._take_scale_factors([pair[g] for g in GRS_IDS])
+        # estimated (or not yet determined) through this time: the epochs of its period may go on, with this G
+        for epoch in self.waiting.scale_factors_through(t_ns, *self._wait_bounds_ns()):
+            super()._process_epoch(epoch)
+
+    def _take_scale_factors(self, msgs: list[Any]) -> None:
+        """G and its joint covariance from the pair of ScaleFactorEstimate messages of one stamp, once determined.
+
+        d moves with G, but is published on the data's schedule (:meth:`_process`), and after the last data
+        with the newest G (:meth:`unpublished`): publishing at each newer G as well sent two estimates a
+        period (~1 ms of CPU each)."""
         g = np.concatenate([np.asarray(m.scale_factors, dtype=np.float64) for m in msgs])
+        if not np.all(np.isfinite(g)):
+            return  # the scale-factor estimator is not determined yet
         cov = np.zeros((6, 6))
         cov[:3, :3] = np.reshape(msgs[0].covariance, (3, 3))
         cov[3:, 3:] = np.reshape(msgs[1].covariance, (3, 3))
         cov[:3, 3:] = np.reshape(msgs[0].cross_covariance, (3, 3))
         cov[3:, :3] = cov[:3, 3:].T
-        if not np.all(np.isfinite(g)):
-            return  # the scale-factor estimator is not determined yet
         self.scale_factors = (g, cov)
-        # d moves with G, but is published on the data's schedule (_process), and after the last data with the
-        # newest G (unpublished): publishing at each newer G too sent two estimates a period (~1 ms of CPU each)
         self.scale_factors_ns = common.stamp_ns(msgs[0].header)
 
     def _on_rate(self, msg: Any) -> None:
@@ -127,6 +149,26 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
                                    throttle_duration_sec=10.0)
             return
         self.add_sample(f"grs{grs_id}", common.stamp_ns(msg.header), common.grs_voltages(msg))
+
+    def _process_epoch(self, epoch: Any) -> None:
+        """Hold the epoch until the scale factors of its publish period have come (:mod:`~taiji2_estimator_pkg.
+        scale_factor_wait`), then on as in every estimator."""
+        for ready in self.waiting.add(epoch, *self._wait_bounds_ns()):
+            super()._process_epoch(ready)
+
+    def _wait_bounds_ns(self) -> tuple[int, int]:
+        return self._period_ns(), int(self.p["max_scale_factor_lag_s"] * 1e9)
+
+    def _end_of_data_tick(self) -> None:
+        # a scale-factor estimator that stopped publishing must not hold the data forever
+        if self.waiting.pending and time.monotonic() - self.last_scale_factors_wall > self.p["scale_factor_wait_s"]:
+            held = self.waiting.release_all()
+            self.get_logger().warn(f"no scale factors for {self.p['scale_factor_wait_s']:g} s: {len(held)} epochs "
+                                   f"from t = {held[0].t_ns / 1e9:.1f} s go on with the scale factors of "
+                                   f"{self.scale_factors_ns / 1e9:.1f} s", throttle_duration_sec=10.0)
+            for epoch in held:
+                super()._process_epoch(epoch)
+        super()._end_of_data_tick()
 
     def _process(self, epoch: Any) -> None:
         voltages = {g: epoch.samples[f"grs{g}"] for g in GRS_IDS if f"grs{g}" in epoch.samples}
@@ -236,13 +278,20 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         msg.nis_mean = float(estimate.nis_mean)
         return msg
 
+    def health_values(self) -> dict[str, Any]:
+        return {"scale_factors_stamp_s": None if self.scale_factors is None else self.scale_factors_ns / 1e9,
+                "epochs_waiting_for_scale_factors": len(self.waiting.pending),
+                "epochs_without_their_scale_factors": self.waiting.released_early}
+
     def publish_health(self, waiting_for: str | None = None) -> None:
         super().publish_health(None if self.scale_factors is not None else "the scale-factor estimates")
 
     def destroy_node(self) -> None:
         try:
             for epoch in self.assembler.flush():
-                self._process(epoch)
+                self._process_epoch(epoch)
+            for epoch in self.waiting.release_all():
+                super()._process_epoch(epoch)
             if self.last_t_ns >= 0 and self.context.ok():
                 self.publish_estimate(self.last_t_ns)
             if self.last_t_ns >= 0:

@@ -347,6 +347,10 @@ class EstimatorNode(rclpy.node.Node):
         """Missing samples summed over the raw streams (for the estimate messages)."""
         return int(sum(self.assembler.missing().values()))
 
+    def health_values(self) -> dict[str, Any]:
+        """Values of this estimator's own in its ``/diagnostics`` status (added to the shared ones)."""
+        return {}
+
     def publish_health(self, waiting_for: str | None = None) -> None:
         """``/diagnostics``: OK, or WARN when starved, rejecting input (named), or inconsistent."""
         estimate = self.last_estimate
@@ -373,7 +377,8 @@ class EstimatorNode(rclpy.node.Node):
             "last_stamp_s": None if estimate is None else estimate.t_s, "paused_s": max(paused_s, 0.0),
             "resumed_from_s": None if self.resumed_from_ns is None else self.resumed_from_ns / 1e9,
             "data_gap_s": self.data_gap_s, "missing": missing,
-            "first_stamp_s": None if self.assembler.first_ns < 0 else self.assembler.first_ns / 1e9})
+            "first_stamp_s": None if self.assembler.first_ns < 0 else self.assembler.first_ns / 1e9,
+            **self.health_values()})
         array = messages.diagnostic_msgs.DiagnosticArray(status=[status])
         set_stamp(array.header, round(estimate.t_s * 1e9) if estimate is not None and np.isfinite(estimate.t_s) else 0)
         self.diag_pub.publish(array)
