@@ -1,10 +1,10 @@
-"""ScaleFactorWait: GRS epochs held until the scale factors of their publish period, with its two bounds."""
+"""ScaleFactorWait and ScaleFactorHistory: d of the data up to t with G of the data up to t, and the bounds."""
 
 from __future__ import annotations
 
 from types import SimpleNamespace
 
-from taiji2_estimator_pkg.scale_factor_wait import ScaleFactorWait
+from taiji2_estimator_pkg.scale_factor_wait import ScaleFactorHistory, ScaleFactorWait
 
 S = 1_000_000_000
 PERIOD, MAX_LAG = S, 5 * S
@@ -41,3 +41,14 @@ def test_at_most_max_lag_of_data_waits():
     # the held span never exceeds 5 s of data: 1.0 .. 1.9 go on with the last G as 6.1 .. 7.0 arrive
     assert _stamps(out) == _stamps(_epochs(1.0, 1.9)) and wait.released_early == 10
     assert wait.pending[-1].t_ns - wait.pending[0].t_ns <= MAX_LAG
+
+
+def test_history_gives_the_scale_factors_of_the_data_up_to_the_epoch():
+    history = ScaleFactorHistory()
+    assert history.through(5 * S) is None and history.newest() is None
+    for k in (1, 2, 3):
+        history.add(k * S, f"G{k}", f"P{k}")
+    assert history.through(S // 2) is None  # none of data that old
+    assert history.through(2 * S + 5)[1] == "G2"  # G3 (of data after the epoch) has come already: not used
+    assert history.through(3 * S)[1] == "G3" and history.newest()[1] == "G3"
+    assert history.through(10 * S)[1] == "G3"  # the newest is kept

@@ -1,14 +1,20 @@
-"""GRS epochs held until the scale factors of their publish period have come.
+"""d of the GRS data up to t with G of the data up to t, however the two estimators run against each other.
 
-The c.m.-offset estimate of the data up to t needs G; offline (``first_met``, ``taiji2 calibrate``) that is G of
-the data up to t. Live, the scale-factor estimator can lag the GRS data by ~1,000 s of data through a playback
-burst, and d published with the G received by then met its requirements up to 800 s of data later than the
-offline estimate did, by an amount that depends on how the processes were scheduled. Holding each epoch until
-the scale-factor estimate of its publish period has come makes the published d, and the time it first meets a
-requirement, the same however fast either process runs. The wait has two bounds, so a dead or absent
-scale-factor estimator never stalls the c.m.-offset one: no wait before the first scale-factor estimate has
-come, and at most ``max_lag_ns`` of data held (older epochs go on with the last G); the node adds a wall-clock
-bound for a scale-factor estimator that stops (:meth:`release_all`). No middleware: epochs in, epochs out.
+Offline (``first_met``, ``taiji2 calibrate``) the c.m.-offset estimate of the data up to t uses G of the data up
+to t. Live, the scale-factor estimator can lag the GRS data by ~1,000 s of data through a playback burst, or run
+ahead of the c.m.-offset estimator by as much: d published with whatever G had arrived met its requirements up
+to 800 s of data later than the offline estimate did when G lagged, and was stamped up to 1,300 s late when G
+led, by amounts that depended on how the processes were scheduled. Two halves make the published d, and the
+time it first meets a requirement, the same however fast either process runs:
+
+* :class:`ScaleFactorWait` holds each GRS epoch until the scale-factor estimate of its publish period has come.
+  Its bounds keep a dead or absent scale-factor estimator from stalling the c.m.-offset one: no wait before
+  the first scale-factor estimate has come, at most ``max_lag_ns`` of data held (older epochs go on with the
+  last G), and the node's wall-clock bound for one that stops (:meth:`ScaleFactorWait.release_all`);
+* :class:`ScaleFactorHistory` keeps the scale factors received by stamp, so an epoch at t uses the newest of
+  the data up to t even where newer ones have already come.
+
+No middleware: epochs and arrays in, epochs and arrays out.
 """
 
 from __future__ import annotations
@@ -56,3 +62,24 @@ class ScaleFactorWait:
             else:
                 break
         return out
+
+
+class ScaleFactorHistory:
+    """Determined scale factors (G and its covariance) by stamp, oldest first; the newest is always kept."""
+
+    def __init__(self) -> None:
+        self.entries: deque[tuple[int, Any, Any]] = deque()
+
+    def add(self, t_ns: int, g: Any, cov: Any) -> None:
+        """Scale factors of the data up to ``t_ns`` (stamps increase)."""
+        self.entries.append((int(t_ns), g, cov))
+
+    def newest(self) -> tuple[int, Any, Any] | None:
+        """(stamp [ns], G, covariance) of the newest, or None."""
+        return self.entries[-1] if self.entries else None
+
+    def through(self, t_ns: int) -> tuple[int, Any, Any] | None:
+        """The newest with a stamp up to ``t_ns`` (None: none yet); older ones are dropped (``t_ns`` increases)."""
+        while len(self.entries) > 1 and self.entries[1][0] <= t_ns:
+            self.entries.popleft()
+        return self.entries[0] if self.entries and self.entries[0][0] <= t_ns else None

@@ -21,7 +21,7 @@ import numpy as np
 from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimate, ComOffsetEstimator, PaperComOffsetFilter
 from taiji2_estimator_pkg.core.parameters import com_offset_options, paper_com_offset_options
 from taiji2_estimator_pkg.nodes import common
-from taiji2_estimator_pkg.scale_factor_wait import ScaleFactorWait
+from taiji2_estimator_pkg.scale_factor_wait import ScaleFactorHistory, ScaleFactorWait
 from taiji2_runtime.batched import create_batched_subscription
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages
@@ -52,8 +52,11 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
                           if self.paper else ComOffsetEstimator(self.instrument, GRS_IDS, com_offset_options(self.p)))
         #: ScaleFactorEstimate messages waiting for the other GRS's of the same stamp: GRS id -> stamp [ns] -> msg
         self.scale_factor_msgs: dict[int, dict[int, Any]] = {g: {} for g in GRS_IDS}
+        # the scale factors in use (G, covariance) and their stamp: those of the data up to the epoch processed
+        # (of the newest data at the end of data); the ones received are in scale_factor_history
         self.scale_factors: tuple[np.ndarray, np.ndarray] | None = None
         self.scale_factors_ns = -1
+        self.scale_factor_history = ScaleFactorHistory()
         self.omega = np.full(3, np.nan)
         self.history: list[tuple[float, np.ndarray | None, np.ndarray]] = []  # paper method only
         self.published_scale_factors_ns = -1  # stamp of the scale factors the last published estimate used
@@ -132,8 +135,13 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         cov[3:, 3:] = np.reshape(msgs[1].covariance, (3, 3))
         cov[:3, 3:] = np.reshape(msgs[0].cross_covariance, (3, 3))
         cov[3:, :3] = cov[:3, 3:].T
-        self.scale_factors = (g, cov)
-        self.scale_factors_ns = common.stamp_ns(msgs[0].header)
+        self.scale_factor_history.add(common.stamp_ns(msgs[0].header), g, cov)
+
+    def _use_scale_factors(self, entry: tuple[int, np.ndarray, np.ndarray] | None) -> None:
+        """Use the scale factors of ``entry`` ((stamp, G, covariance); None: keep those in use)."""
+        if entry is not None:
+            self.scale_factors_ns, g, cov = entry
+            self.scale_factors = (g, cov)
 
     def _on_rate(self, msg: Any) -> None:
         self.omega = np.array([msg.vector.x, msg.vector.y, msg.vector.z], dtype=np.float64)
@@ -173,6 +181,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
     def _process(self, epoch: Any) -> None:
         voltages = {g: epoch.samples[f"grs{g}"] for g in GRS_IDS if f"grs{g}" in epoch.samples}
         self.last_t_ns = epoch.t_ns
+        self._use_scale_factors(self.scale_factor_history.through(epoch.t_ns))
         if self.paper:
             v = np.full((2, 6), np.nan)
             for g, values in voltages.items():
@@ -194,7 +203,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
                                        f"{report.nis:.4g}, scale factors of {self.scale_factors_ns / 1e9:.1f} s)",
                                        throttle_duration_sec=10.0)
         if self._stamp_due(epoch.t_ns):
-            self.publish_estimate(epoch.t_ns)
+            self._publish(epoch.t_ns)
         if self.checkpoint_due(epoch.t_ns):
             self.save_checkpoint(epoch.t_ns)
 
@@ -209,8 +218,9 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
     def unpublished(self) -> bool:
         """Data or scale factors newer than those of the last published estimate (published at the end of data:
         a G that arrives after the last GRS sample changes d without moving its stamp)."""
-        return super().unpublished() or (self.last_t_ns >= 0 and self.scale_factors is not None
-                                         and self.scale_factors_ns > self.published_scale_factors_ns)
+        newest = self.scale_factor_history.newest()
+        return super().unpublished() or (self.last_t_ns >= 0 and newest is not None
+                                         and newest[0] > self.published_scale_factors_ns)
 
     def _gate_scale_factors(self, t_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The scale factors for the gate of the epoch at ``t_ns``, or None (no gate) where they are stale
@@ -241,8 +251,14 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         return self.estimator.process_batch(t, q, v, {1: g[:3], 2: g[3:]})
 
     def publish_estimate(self, t_ns: int) -> None:
-        """Publish d from the GRS data up to ``t_ns`` (the stamp) and the latest scale factors (their stamp in
-        ``scale_factors_stamp``: the estimate rests on data up to the later of the two)."""
+        """At the end of the data: publish d from the GRS data up to ``t_ns`` with the newest scale factors
+        (which may be of data after ``t_ns``: the final d uses the final G, as ``taiji2 calibrate``)."""
+        self._use_scale_factors(self.scale_factor_history.newest())
+        self._publish(t_ns)
+
+    def _publish(self, t_ns: int) -> None:
+        """Publish d from the GRS data up to ``t_ns`` (the stamp) and the scale factors in use (their stamp in
+        ``scale_factors_stamp``)."""
         try:
             estimate = self._current_estimate()
         except Exception as exc:  # keep the last estimate rather than crash
@@ -279,12 +295,14 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         return msg
 
     def health_values(self) -> dict[str, Any]:
-        return {"scale_factors_stamp_s": None if self.scale_factors is None else self.scale_factors_ns / 1e9,
+        newest = self.scale_factor_history.newest()
+        return {"scale_factors_received_through_s": None if newest is None else newest[0] / 1e9,
                 "epochs_waiting_for_scale_factors": len(self.waiting.pending),
                 "epochs_without_their_scale_factors": self.waiting.released_early}
 
     def publish_health(self, waiting_for: str | None = None) -> None:
-        super().publish_health(None if self.scale_factors is not None else "the scale-factor estimates")
+        super().publish_health(None if self.scale_factor_history.newest() is not None
+                               else "the scale-factor estimates")
 
     def destroy_node(self) -> None:
         try:
