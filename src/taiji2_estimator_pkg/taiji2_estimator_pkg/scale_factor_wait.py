@@ -39,8 +39,10 @@ class ScaleFactorWait:
         return self._ready(period_ns, max_lag_ns)
 
     def scale_factors_through(self, t_ns: int, period_ns: int, max_lag_ns: int) -> list[Any]:
-        """Scale factors of the data up to ``t_ns`` have come; returns the epochs now free to go on."""
-        self.through_ns = max(self.through_ns, int(t_ns))
+        """Scale factors of the data up to ``t_ns`` have come; returns the epochs now free to go on. The pairs come
+        in stamp order; an older one is a scale-factor estimator that restarted (from its checkpoint, or on a
+        restarted source's rerun): the held epochs wait for it to catch up again."""
+        self.through_ns = int(t_ns)
         return self._ready(period_ns, max_lag_ns)
 
     def release_all(self) -> list[Any]:
@@ -71,7 +73,10 @@ class ScaleFactorHistory:
         self.entries: deque[tuple[int, Any, Any]] = deque()
 
     def add(self, t_ns: int, g: Any, cov: Any) -> None:
-        """Scale factors of the data up to ``t_ns`` (stamps increase)."""
+        """Scale factors of the data up to ``t_ns``. Stamps increase; an older one starts the history again (a
+        restarted scale-factor estimator: what it had estimated beyond is not of the data it will use)."""
+        if self.entries and t_ns < self.entries[-1][0]:
+            self.entries.clear()
         self.entries.append((int(t_ns), g, cov))
 
     def newest(self) -> tuple[int, Any, Any] | None:

@@ -34,7 +34,9 @@ this fraction of the data span the epoch closes (their stamp against the epoch's
 sample); older ones leave the epoch ungated. A replay at full speed feeds the raw data far ahead of the
 scale-factor estimator (G of 115 s gating an epoch at 413 s: NIS 40.7, a false rejection in 1 replay of
 4), so the gate's decisions would depend on how fast each process ran; G's error shrinks as 1/sqrt(span),
-so G from 80 % of the span is within 12 % of the current one's accuracy."""
+so G from 80 % of the span is within 12 % of the current one's accuracy. Since the epochs wait for the
+scale factors of their publish period (:mod:`~taiji2_estimator_pkg.scale_factor_wait`), this applies only
+where that wait was given up (a silent scale-factor estimator, or more than ``max_scale_factor_lag_s`` held)."""
 STREAMS = ("grs1", "grs2")
 STREAMS_PAPER = ("star_tracker", "grs1", "grs2")  # the paper method builds A~ from the star tracker
 
