@@ -28,15 +28,6 @@ from taiji2_runtime.ros import messages
 from taiji2_runtime.threads import limit_blas_threads
 
 GRS_IDS = (1, 2)
-GATE_SCALE_FACTOR_MIN_FRACTION = 0.8
-"""The pre-fit gate of an epoch uses the received scale factors only if they were estimated from at least
-this fraction of the data span the epoch closes (their stamp against the epoch's, both from the first
-sample); older ones leave the epoch ungated. A replay at full speed feeds the raw data far ahead of the
-scale-factor estimator (G of 115 s gating an epoch at 413 s: NIS 40.7, a false rejection in 1 replay of
-4), so the gate's decisions would depend on how fast each process ran; G's error shrinks as 1/sqrt(span),
-so G from 80 % of the span is within 12 % of the current one's accuracy. Since the epochs wait for the
-scale factors of their publish period (:mod:`~taiji2_estimator_pkg.scale_factor_wait`), this applies only
-where that wait was given up (a silent scale-factor estimator, or more than ``max_scale_factor_lag_s`` held)."""
 STREAMS = ("grs1", "grs2")
 STREAMS_PAPER = ("star_tracker", "grs1", "grs2")  # the paper method builds A~ from the star tracker
 
@@ -65,7 +56,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         self.waiting = ScaleFactorWait()  # epochs held until the scale factors of their period have come
         self.last_scale_factors_wall = time.monotonic()
         self.last_nis = float("nan")
-        self.ungated_stale = 0  # epochs not gated: the scale factors received were stale for them
+        self.ungated_stale = 0  # epochs not gated: no scale factors of their own publish period
         resumed = self.resume()
         if resumed is not None:
             self.last_t_ns = resumed
@@ -225,15 +216,22 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
                                          and newest[0] > self.published_scale_factors_ns)
 
     def _gate_scale_factors(self, t_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """The scale factors for the gate of the epoch at ``t_ns``, or None (no gate) where they are stale
-        (:data:`GATE_SCALE_FACTOR_MIN_FRACTION`)."""
-        first = self.assembler.first_ns
-        if self.scale_factors is None or first < 0:
-            return self.scale_factors
-        if self.scale_factors_ns - first >= GATE_SCALE_FACTOR_MIN_FRACTION * (t_ns - first):
+        """The scale factors for the pre-fit gate of the epoch at ``t_ns``: those in use if they are of the epoch's
+        own publish period (the G offline gates it with), else None (not gated; counted and logged).
+
+        An older G gates falsely: a full-speed replay whose raw data ran far ahead gated an epoch at 413 s with
+        G of 115 s (NIS 40.7); and under load the scale-factor estimator's keep-last-1 writer can replace an
+        estimate the c.m.-offset node has not yet read, so that epochs waited for a later pair and were gated
+        with one a few periods old (66 false rejections in 1 of 6 replays beside two CPU-bound processes, with
+        an 80 %-of-the-span freshness rule). Ungated, an epoch can only let an outlier through: the post-fit
+        gate of ``taiji2 calibrate`` still removes it offline."""
+        if self.scale_factors is None:
+            return None
+        period_ns = self._period_ns()
+        if self.scale_factors_ns >= t_ns // period_ns * period_ns:
             return self.scale_factors
         self.ungated_stale += 1
-        self.get_logger().info(f"epoch at {t_ns / 1e9:.1f} s not gated: the scale factors received are of "
+        self.get_logger().info(f"epoch at {t_ns / 1e9:.1f} s not gated: the newest scale factors of its data are of "
                                f"{self.scale_factors_ns / 1e9:.1f} s ({self.ungated_stale} epochs so far)",
                                throttle_duration_sec=10.0)
         return None
