@@ -102,24 +102,24 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
             return
         self.last_scale_factors_wall = time.monotonic()
         gid, t_ns = int(msg.grs_id), common.stamp_ns(msg.header)
-        other = self.scale_factor_msgs[GRS_IDS[1] if gid == GRS_IDS[0] else GRS_IDS[0]]
+        other_gid = GRS_IDS[1] if gid == GRS_IDS[0] else GRS_IDS[0]
+        other = self.scale_factor_msgs[other_gid]
         for stale in [s for s in other if s < t_ns]:  # each topic comes in stamp order: never paired now
             del other[stale]
         if t_ns not in other:
             self.scale_factor_msgs[gid][t_ns] = msg
             return
-        pair = {gid: msg, GRS_IDS[1] if gid == GRS_IDS[0] else GRS_IDS[0]: other.pop(t_ns)}
+        pair = {gid: msg, other_gid: other.pop(t_ns)}
+        # d moves with G but is published on the data's schedule (_process) and, after the last data, with the
+        # newest G (unpublished): publishing at each newer G as well sent two estimates a period (~1 ms of CPU each)
         self._take_scale_factors([pair[g] for g in GRS_IDS])
         # estimated (or not yet determined) through this time: the epochs of its period may go on, with this G
         for epoch in self.waiting.scale_factors_through(t_ns, *self._wait_bounds_ns()):
             super()._process_epoch(epoch)
 
     def _take_scale_factors(self, msgs: list[Any]) -> None:
-        """G and its joint covariance from the pair of ScaleFactorEstimate messages of one stamp, once determined.
-
-        d moves with G, but is published on the data's schedule (:meth:`_process`), and after the last data
-        with the newest G (:meth:`unpublished`): publishing at each newer G as well sent two estimates a
-        period (~1 ms of CPU each)."""
+        """G and its joint covariance from the pair of ScaleFactorEstimate messages of one stamp, once determined,
+        into the history."""
         g = np.concatenate([np.asarray(m.scale_factors, dtype=np.float64) for m in msgs])
         if not np.all(np.isfinite(g)):
             return  # the scale-factor estimator is not determined yet
