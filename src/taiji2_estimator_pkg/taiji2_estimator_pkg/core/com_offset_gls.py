@@ -22,6 +22,7 @@ from .com_offset_estimate import ComOffsetEstimate
 from .com_offset_model import ComOffsetModel, ComOffsetOptions
 from .epoch_arrays import EpochArrays
 from .gate_estimate import MIN_EIGENVALUE_RATIO, GateEstimate, gate_estimate
+from .gate_span import GateSpan
 from .instrument import InstrumentModel, angular_differences, linear_sums
 from .joint_com_offset import solve_joint
 from .kalman import chi2_gate
@@ -113,6 +114,7 @@ class ComOffsetEstimator:
         self.determined = False
         self._combination_cache: tuple | None = None
         self._noise_cache: dict[tuple[int, bytes], tuple[ComOffsetModel, tuple]] = {}
+        self.gate_span = GateSpan(max(1, round(self.options.gate_refresh_s * instrument.sample_rate_hz)))
 
     # solution for given scale factors --------------------------------------------------------
     def corrected_information(self) -> np.ndarray:
@@ -142,9 +144,12 @@ class ComOffsetEstimator:
         self._combination_cache = (key, (a_xx, a_yy), model)  # the model is held so its id stays unique
         return a_xx, a_yy
 
-    def _beta_system(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Information and vector on (beta, x0) for scale factors g, with the EIV correction."""
-        info_all = self.corrected_information()
+    def _beta_system(self, g: np.ndarray, info_all: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Information and vector on (beta, x0) for scale factors g, with the EIV correction, from
+        ``info_all`` (default: :meth:`corrected_information`, all epochs so far)."""
+        if info_all is None:
+            info_all = self.corrected_information()
         a_xx, a_yy = self._engine_combination(np.asarray(g, dtype=np.float64))
         info = a_xx.T @ info_all @ a_xx
         vec = a_xx.T @ info_all @ a_yy
@@ -283,21 +288,35 @@ class ComOffsetEstimator:
         theta[model.n_columns:] = beta[model.n_beta:]
         return theta
 
-    def _gate_estimate(self, g: np.ndarray) -> GateEstimate | None:
-        """The estimate from the epochs so far at scale factors g, for the gate of the next epoch (None:
-        not determined).
+    def _span_gate_estimate(self, index: int, g: np.ndarray | None) -> GateEstimate | None:
+        """The gate's estimate for the epoch at grid ``index`` at scale factors g (None: no gate): that of
+        the data before the first epoch of its span (core/gate_span.py), solved once per span and G."""
+        span = self.gate_span
+        if span.starts(index, self.filter.n_segments):
+            span.take(self.corrected_information() if self.filter.n_updates else None)
+        if g is None or span.information is None or not np.all(np.isfinite(g)):
+            return None
+        key = g.tobytes()
+        if span.solved is None or span.solved[0] != key:
+            span.solved = (key, self._gate_estimate(g, span.information))
+        return span.solved[1]
+
+    def _gate_estimate(self, g: np.ndarray, info_all: np.ndarray) -> GateEstimate | None:
+        """The estimate from the corrected information ``info_all`` at scale factors g, for the gate
+        (None: not determined).
 
         Once determined, by a Cholesky factor of the (beta, x0) information where its eigenvalues certainly
         determine every direction (core/gate_estimate.py: the same algebra as :meth:`solve`'s
-        eigen-decomposition at a fraction of its cost); :meth:`solve` otherwise."""
+        eigen-decomposition at a fraction of its cost); :meth:`solve`'s algebra otherwise."""
         g = np.asarray(g, dtype=np.float64)
+        system = self._beta_system(g, info_all)
         if self.determined:
-            info, vec, a_xx, _ = self._beta_system(g)
+            info, vec, a_xx, _ = system
             solved = gate_estimate(info, vec, MIN_EIGENVALUE_RATIO)
             if solved is not None:
                 beta, factor, scale = solved
                 return GateEstimate(self._engine_theta(g, beta), factor, scale, a_xx)
-        beta, cov, ok = self.solve(g)
+        beta, cov, ok = self._solve_system(g, system)
         if not ok:
             return None
         a_xx, _ = self._engine_combination(g)
@@ -386,11 +405,8 @@ class ComOffsetEstimator:
             basis = model.basis_one(sums[0], diffs[0], omega[0], self._tau(t_s))
         else:
             basis = model.basis(sums, diffs, omega, np.array([self._tau(t_s)]), present[None, :])[0]
-        estimate = None
-        if scale_factors is not None:
-            g, _ = self._scale_factors(scale_factors)
-            if np.all(np.isfinite(g)) and self.filter.n_updates:
-                estimate = self._gate_estimate(g)
+        g = None if scale_factors is None else self._scale_factors(scale_factors)[0]
+        estimate = self._span_gate_estimate(index, g)
         sel, r_step, eiv = self._epoch_noise(present)
         info = self.filter.step(np.zeros(model.m), basis, rows=sel, r=r_step,
                                 gate=self.gate if estimate is not None else None, estimate=estimate)
@@ -571,7 +587,7 @@ class ComOffsetEstimator:
         return {"method": self.method, "grs_ids": list(self.grs_ids), "filter": self.filter.state_dict(),
                 "validator": self.validator.state_dict(), "eiv_sum": self.eiv_sum.tolist(), "n_eiv": self.n_eiv,
                 "t0_s": self.t0_s, "t_last_s": self.t_last_s, "last_index": self.last_index,
-                "determined": self.determined}
+                "determined": self.determined, "gate_span": self.gate_span.state_dict()}
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
         """Resume from a :meth:`state_dict` checkpoint."""
@@ -585,6 +601,8 @@ class ComOffsetEstimator:
         self.t_last_s = float(state["t_last_s"])
         self.last_index = state["last_index"]
         self.determined = bool(state["determined"])
+        if "gate_span" in state:  # checkpoints before the gate's spans: a snapshot at the next epoch
+            self.gate_span.load_state_dict(state["gate_span"])
 
     @classmethod
     def from_state_dict(cls, instrument: InstrumentModel, state: Mapping[str, Any],

@@ -13,6 +13,7 @@ Equations: docs/estimators.md, section 5.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -55,6 +56,10 @@ class ComOffsetOptions:
         Time unit of the trend regressor [s] (conditioning only).
     gate_probability : float or None
         False-alarm probability of the chi-square gate per epoch (None: no gating).
+    gate_refresh_s : float
+        Per-sample path: the gate tests each epoch against the estimate of the data before the first
+        epoch of its span of this much data time, solved once per span (:mod:`.gate_span`) [s]; at most
+        one sample period: a solve at every epoch.
     snap_tolerance : float
         Relative distance at which the filter covariance is set back to its steady state.
     determination_margin : float
@@ -72,6 +77,7 @@ class ComOffsetOptions:
     joint: bool = True
     trend_time_scale_s: float = 1000.0
     gate_probability: float | None = 1e-6
+    gate_refresh_s: float = 1.0
     snap_tolerance: float = 1e-10
     determination_margin: float = 20.0
     adapt_noise: bool = True
@@ -80,6 +86,8 @@ class ComOffsetOptions:
     def __post_init__(self) -> None:
         if self.detrend not in ("linear", "constant", "none"):
             raise ValueError(f"detrend: 'linear', 'constant' or 'none', got {self.detrend!r}")
+        if not (self.gate_refresh_s >= 0.0 and math.isfinite(self.gate_refresh_s)):
+            raise ValueError(f"gate_refresh_s: a finite time >= 0 [s], got {self.gate_refresh_s!r}")
 
 
 class ComOffsetModel:

@@ -49,7 +49,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     },
     "com_offset_estimator": {
         "layout": "type1", "method": "gls", "grs_ids": [1, 2], "detrend": "linear", "trend_time_scale_s": 1000.0,
-        "joint": True, "adapt_noise": True, "gate_probability": 1e-6, "snap_tolerance": 1e-10,
+        "joint": True, "adapt_noise": True, "gate_probability": 1e-6, "gate_refresh_s": 1.0, "snap_tolerance": 1e-10,
         "determination_margin": 20.0, "paper.window": 2001,
         "paper.polyorder": 2, "paper.initial_sigma_m": 0.01, "paper.detrend_sigma": 1e-6,
         "paper.gate_probability": 0.0, **_VALIDATION, "checkpoint_file": "", "checkpoint_period_s": 10.0,
@@ -180,7 +180,8 @@ def com_offset_options(params: Mapping[str, Any]) -> ComOffsetOptions:
     return ComOffsetOptions(
         detrend=str(params["detrend"]), trend_time_scale_s=float(params["trend_time_scale_s"]),
         joint=bool(params["joint"]), adapt_noise=bool(params["adapt_noise"]),
-        gate_probability=_probability(params["gate_probability"]), snap_tolerance=float(params["snap_tolerance"]),
+        gate_probability=_probability(params["gate_probability"]), gate_refresh_s=float(params["gate_refresh_s"]),
+        snap_tolerance=float(params["snap_tolerance"]),
         determination_margin=float(params["determination_margin"]), validation=validation_options(params))
 
 
