@@ -3,7 +3,9 @@ and the ground's contract topics come out in stamp order, each sample once, with
 
 from __future__ import annotations
 
+import itertools
 import json
+import time
 
 import numpy as np
 
@@ -11,6 +13,7 @@ from taiji2_runtime.packets.definition import STREAMS
 from taiji2_runtime.packets.packetize import encode_packet
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.link import Downlink, load_link_model
+from taiji2_sim_pkg.nodes import ground_receiver
 from taiji2_sim_pkg.nodes.ground_receiver import GroundReceiver
 from taiji2_sim_pkg.nodes.space_link import SpaceLink
 from taiji2_sim_pkg.nodes.telemetry_packetizer import TelemetryPacketizer
@@ -58,6 +61,10 @@ def test_link_chain_matches_the_model_and_delivers_in_order(context, executor, t
     reception: list[dict] = []
     observer.create_subscription(messages.std_msgs.String, "/ground/link/reception",
                                  lambda m: reception.append(json.loads(m.data)), qos)
+    health: list = []  # the receiver's /diagnostics statuses
+    observer.create_subscription(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics",
+                                 lambda m: health.extend(s for s in m.status if s.name == "ground_receiver"), qos)
+    started = time.monotonic()
     assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in (*pubs.values(), cmd_pub)))
     for k in range(1, N + 1):
         stamp = divmod(k * 100_000_000, 1_000_000_000)
@@ -83,6 +90,15 @@ def test_link_chain_matches_the_model_and_delivers_in_order(context, executor, t
     assert spin_until(executor, lambda: bool(reception) and reception[-1]["end_of_data"], timeout_s=60.0)
     assert spin_until(executor, lambda: sum(len(v) for v in got.values()) >= sum(
         reception[-1]["counts"][s]["released"] for s in ("star_tracker", "grs1", "grs2")), timeout_s=30.0)
+    # /diagnostics: the end of data at once, otherwise at most once a wall second and at each change of level,
+    # not once per burst (the reception records)
+    assert spin_until(executor, lambda: bool(health) and json.loads(
+        {v.key: v.value for v in health[-1].values}["end_of_data"]), timeout_s=30.0)
+    assert {v.key: json.loads(v.value) for v in health[-1].values}["counts"] == reception[-1]["counts"]
+    levels = [any(c["missing"] for c in r["counts"].values()) for r in reception]
+    changes = sum(a != b for a, b in itertools.pairwise(levels))
+    assert len(reception) > 20
+    assert len(health) <= 2 + changes + (time.monotonic() - started) / ground_receiver.DIAGNOSTICS_PERIOD_S
     # the plain model, offered the same packets in the packetizer's order and bursts, gives the same link
     link = Downlink(load_link_model(tmp_path / "fast.yaml"), 3)
     expected = {}

@@ -14,9 +14,6 @@ import os
 #: Highest participant index probed by unicast discovery (participants per host).
 MAX_PARTICIPANTS_PER_HOST = 60
 
-#: Highest participant index probed by unicast discovery (participants per host).
-MAX_PARTICIPANTS_PER_HOST = 60
-
 DEFAULT_CYCLONEDDS_CONFIG = f"""<CycloneDDS><Domain Id="any">
   <General>
     <Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>

@@ -11,13 +11,17 @@ executor's verification reports (APID 0x141, PUS TM[1,x]) are decoded, deduplica
 the reception record (``command_reports``). After each
 burst it publishes on ``/ground/link/reception`` (JSON) the ground time, the onboard time through
 which each stream has been released and the counts (received, released, duplicate, out_of_order,
-missing, held), and the same on ``/diagnostics`` (WARN naming missing samples). Parameters:
+missing, held), and the same on ``/diagnostics`` (WARN naming missing samples) once a second of wall
+time, at once when its level changes, and at the end of the data (a playback burst brings a reception
+record per telemetry burst, ~100 a second; each on ``/diagnostics`` cost CPU here, in the recorder and
+in every monitor for nothing a person or ``rqt_robot_monitor`` reads). Parameters:
 ``config/ground_receiver.yaml``.
 """
 
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -34,7 +38,8 @@ from taiji2_sim_pkg.nodes import link_topics as lt
 
 _NS = 1_000_000_000
 _FRAMES = {"grs1": "tmrf1", "grs2": "tmrf2"}
-
+#: wall time between the receiver's /diagnostics [s] (as the other nodes' health timers)
+DIAGNOSTICS_PERIOD_S = 1.0
 
 
 class GroundReceiver(rclpy.node.Node):
@@ -61,6 +66,10 @@ class GroundReceiver(rclpy.node.Node):
         self._samples_out = 0
         self._reports_seen: set[tuple[int, int]] = set()
         self._new_reports: list[dict[str, Any]] = []
+        self._last_diagnostics: tuple[float, int] | None = None  # (monotonic time, level) of the last sent
+        self._unsent_state: dict[str, Any] | None = None  # a reception record not yet on /diagnostics
+        steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics, clock=steady)
 
     def _on_burst(self, msg: Any) -> None:
         try:
@@ -137,17 +146,33 @@ class GroundReceiver(rclpy.node.Node):
         state = self.reception()
         self._new_reports = []
         self._reception_pub.publish(messages.std_msgs.String(data=json.dumps(state)))
+        self._unsent_state = state
+        last = self._last_diagnostics
+        if last is None or self._ended or self._level(state) != last[1] \
+                or time.monotonic() - last[0] >= DIAGNOSTICS_PERIOD_S:
+            self._publish_diagnostics()
+
+    @staticmethod
+    def _level(state: dict[str, Any]) -> int:
+        d = messages.diagnostic_msgs.DiagnosticStatus
+        return d.WARN if any(c["missing"] for c in state["counts"].values()) else d.OK
+
+    def _publish_diagnostics(self) -> None:
+        """The last reception record on ``/diagnostics`` (the health timer's tick: if not sent yet)."""
+        state, self._unsent_state = self._unsent_state, None
+        if state is None:
+            return
         d = messages.diagnostic_msgs
         missing = {k: c["missing"] for k, c in state["counts"].items() if c["missing"]}
         status = d.DiagnosticStatus(name="ground_receiver", hardware_id="taiji2_ground")
-        status.level = d.DiagnosticStatus.WARN if missing else d.DiagnosticStatus.OK
+        status.level = self._level(state)
+        self._last_diagnostics = (time.monotonic(), status.level)
         status.message = ("samples lost on the link: " + ", ".join(f"{k} {n}" for k, n in missing.items())
                           if missing else "nominal")
         status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in state.items()]
         array = d.DiagnosticArray(status=[status])
         lt.set_stamp(array.header, max(self._ground_ns, 0))
         self._diag_pub.publish(array)
-
 
 def main(args: Sequence[str] | None = None) -> int:
     return run_node(GroundReceiver, args)
