@@ -26,6 +26,9 @@ class _Recorder:
         for topic, name in RAW.items():
             node.create_subscription(getattr(messages.taiji2_msgs, name), topic,
                                      lambda m, t=topic: self.samples[t].append(m), qos)
+        self.truth_scale_factors: list = []
+        node.create_subscription(messages.taiji2_msgs.ScaleFactorEstimate, "/taiji2/sim/grs1/scale_factors",
+                                 self.truth_scale_factors.append, qos)
 
 
 def _new_context(args):
@@ -88,6 +91,10 @@ def test_graph_is_lossless_and_equals_the_batch_core(context, executor, sim_cont
     # when commands arrive) give the batch's bits
     np.testing.assert_array_equal(quats, batch.st_quat_xyzw)
     assert all(m.header.frame_id == "tmrf2" and m.grs_id == 2 for m in recorder.samples["/taiji2/grs2/voltages"])
+    # the truth's G at 1 Hz, steps 1, 11, 21, ... (the node steps in chunks: each sample its own step)
+    truth = [(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, m.samples_used)
+             for m in recorder.truth_scale_factors]
+    assert truth == [(k * 100_000_000, k) for k in range(1, n + 1, 10)]
 
 
 def test_bad_commands_are_rejected_counted_and_the_last_valid_one_kept(context, executor, sim_context):

@@ -31,7 +31,7 @@ from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.command_gate import CommandGate, CommandSchedule
 from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.range_check import RangeMonitor
-from taiji2_sim_pkg.core.simulator import SimSample, Simulator
+from taiji2_sim_pkg.core.simulator import SimOutput, SimSample, Simulator
 
 COMMAND_TOPIC = "/taiji2/maneuver/command"
 STAR_TRACKER_TOPIC = "/taiji2/star_tracker"
@@ -308,12 +308,11 @@ class SpacecraftSim(rclpy.node.Node):
                         self._n_steps - self._sim.step_index)
             if steps <= 0:
                 return
-            t0_ns = self._time_ns()
+            t0_ns, first_step = self._time_ns(), self._sim.step_index
             torques = np.array([self._schedule.command_at(t0_ns + j * self._dt_ns) for j in range(steps)])
             out = self._sim.advance(torques)
             self._check_range(out.t_s, out.truth.grs_linear_maneuver, out.truth.grs_linear_meas)
-            for j in range(steps):
-                self._publish_sample(out[j], t0_ns + (j + 1) * self._dt_ns, check_range=False)
+            self._publish_chunk(out, t0_ns, first_step)
             if self._sim.step_index >= self._n_steps:
                 self._finish()
             else:
@@ -343,28 +342,44 @@ class SpacecraftSim(rclpy.node.Node):
         for event in self._range.update_block(t_s, maneuver, total):
             self.get_logger().warn(event.message())
 
-    def _publish_sample(self, sample: SimSample, t_ns: int, check_range: bool = True) -> None:
+    def _publish_sample(self, sample: SimSample, t_ns: int) -> None:
+        """Publish one stepped sample (its step: the simulator's step count)."""
+        self._publish_readouts(sample.st_quat_xyzw.tolist(), sample.st_cov_rad2.tolist(), sample.voltages_v.tolist(),
+                               t_ns)
+        truth = sample.truth
+        self._check_range([sample.t_s], truth.grs_linear_maneuver[None], truth.grs_linear_meas[None])
+        if self._truth is not None:
+            self._truth.publish(sample, t_ns, self._sim.step_index)
+
+    def _publish_chunk(self, out: SimOutput, t0_ns: int, first_step: int) -> None:
+        """Publish the samples of one vectorised chunk: sample j is stamped ``t0_ns + (j + 1) dt`` and is step
+        ``first_step + j + 1``. The readouts become Python floats in one call per array (element by element
+        that cost as much as the messages), and a sample's truth is assembled only where it is published."""
+        quats, covs, volts = out.st_quat_xyzw.tolist(), out.st_cov_rad2.tolist(), out.voltages_v.tolist()
+        for j in range(len(out)):
+            t_ns = t0_ns + (j + 1) * self._dt_ns
+            self._publish_readouts(quats[j], covs[j], volts[j], t_ns)
+            step = first_step + j + 1
+            if self._truth is not None and self._truth.publishes_at(step):
+                self._truth.publish(out[j], t_ns, step)
+
+    def _publish_readouts(self, quat_xyzw: list[float], cov_rad2: list[float], voltages_v: list[list[float]],
+                          t_ns: int) -> None:
+        """The star tracker and both GRS of one sample on their topics, stamped ``t_ns``."""
         m = messages.taiji2_msgs
         star = m.StarTracker()
         _stamp(star.header, t_ns)
         star.header.frame_id = "crf"
-        q = sample.st_quat_xyzw
-        star.attitude.x, star.attitude.y, star.attitude.z, star.attitude.w = (float(v) for v in q)
-        star.attitude_covariance = [float(v) for v in sample.st_cov_rad2]
+        star.attitude.x, star.attitude.y, star.attitude.z, star.attitude.w = quat_xyzw
+        star.attitude_covariance = cov_rad2
         self._star_pub.publish(star)
         for index, pub in enumerate(self._grs_pubs):
-            volts = sample.voltages_v[index]
             grs = m.GrsVoltages()
             _stamp(grs.header, t_ns)
             grs.header.frame_id = TMRF_FRAMES[index]
             grs.grs_id = index + 1
-            grs.vx1, grs.vx2, grs.vy1, grs.vy2, grs.vz1, grs.vz2 = (float(v) for v in volts)
+            grs.vx1, grs.vx2, grs.vy1, grs.vy2, grs.vz1, grs.vz2 = voltages_v[index]
             pub.publish(grs)
-        truth = sample.truth
-        if check_range:
-            self._check_range([sample.t_s], truth.grs_linear_maneuver[None], truth.grs_linear_meas[None])
-        if self._truth is not None:
-            self._truth.publish(sample, t_ns, self._sim.step_index)
 
     def _publish_diagnostics(self) -> None:
         d = messages.diagnostic_msgs
@@ -445,6 +460,10 @@ class _TruthPublishers:
         self._offset = [node.create_publisher(t.ComOffsetEstimate, f"/taiji2/sim/grs{i}/com_offset", qos)
                         for i in (1, 2)]
         self._mass_kg = None
+
+    def publishes_at(self, step: int) -> bool:
+        """Whether :meth:`publish` sends anything at simulator step ``step`` (counted from 1)."""
+        return self._kinematics or step % 10 == 1
 
     def publish(self, sample: SimSample, t_ns: int, step: int) -> None:
         t = messages.taiji2_msgs
