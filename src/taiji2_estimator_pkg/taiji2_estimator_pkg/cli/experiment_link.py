@@ -284,7 +284,7 @@ def run_link_experiment(args: argparse.Namespace) -> int:
                                  "__ns:=/onboard", "-p", f"end_of_data_s:={duration_s}",
                                  "-p", "command_reports:=true"],
         "onboard_executor": ["run", "taiji2_sim_pkg", "onboard_executor", "--ros-args", "-r", "__ns:=/onboard",
-                             "-p", "use_sim_time:=true", "-p", "lookahead_s:=2.0",
+                             "-p", "use_sim_time:=true", "-p", "lookahead_s:=10.0",
                              "-p", f"schedule_capacity:={model.onboard_schedule_capacity}",
                              "-p", f"time_margin_s:={model.command_lead_s}"],
         "command_planner": ["run", "taiji2_sim_pkg", "command_planner", "--ros-args", "-r", "__ns:=/ground",

@@ -42,7 +42,7 @@ class OnboardExecutor(rclpy.node.Node):
         margin = dp("time_margin_s", 60.0, read_only(
             "an activity due within this time of its arrival is refused [s]")).value
         rate_hz = dp("publish_rate_hz", 10.0, read_only("command rate on the onboard bus [Hz]")).value
-        self._lookahead_ns = round(_NS * dp("lookahead_s", 2.0, read_only(
+        self._lookahead_ns = round(_NS * dp("lookahead_s", 10.0, read_only(
             "publish time-tagged commands this far ahead of the clock [s]")).value)
         self._period_ns = round(_NS / rate_hz)
         self.schedule = OnboardSchedule(capacity, margin)
