@@ -319,8 +319,7 @@ class ComOffsetEstimator:
         beta, cov, ok = self._solve_system(g, system)
         if not ok:
             return None
-        a_xx, _ = self._engine_combination(g)
-        return GateEstimate.from_covariance(self._engine_theta(g, beta), cov, a_xx)
+        return GateEstimate.from_covariance(self._engine_theta(g, beta), cov, system[2])
 
     # per-sample path -------------------------------------------------------------------------
     def _epoch_noise(self, present: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray]:
