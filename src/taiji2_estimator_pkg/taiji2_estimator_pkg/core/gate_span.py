@@ -7,6 +7,9 @@ every epoch (10 Hz) cost a fifth of the c.m.-offset estimator's per-epoch time, 
 information as it stood at the first epoch of each span of ``gate_refresh_s`` of data: once per span
 (and per scale factors G in use), from data at most one span older than the epoch tested.
 
+Both estimators gate this way: the c.m.-offset estimator solves its snapshot per scale factors G, the
+scale-factor estimator (whose gates test the star-tracker innovation and the GRS pair's difference) once.
+
 Spans are fixed by the epochs' grid indices, never by arrival, so a run gates the same whatever its
 delivery timing; the snapshot is part of the checkpoint, so a resumed run gates as an uninterrupted one.
 A new filter segment (a restarted source) takes a new snapshot at once: an estimate of the old
@@ -36,7 +39,11 @@ class GateSpan:
     information : numpy.ndarray or None
         The information the gate solves in this span (None: no data before the span).
     solved : tuple or None
-        ``(G as bytes, estimate)`` for the last G asked for in this span.
+        ``(G as bytes, estimate)`` for the last G asked for in this span (an estimator without outside
+        parameters keys it by ``b""``).
+    determined : bool
+        Whether the estimator had declared its estimate determined when the snapshot was taken (for an
+        estimator whose gate waits for that; the data after the snapshot must not decide it).
     """
 
     span_epochs: int
@@ -44,6 +51,7 @@ class GateSpan:
     segment: int = 0
     information: np.ndarray | None = None
     solved: tuple[bytes, Any] | None = None
+    determined: bool = False
 
     def __post_init__(self) -> None:
         if self.span_epochs < 1:
@@ -58,18 +66,20 @@ class GateSpan:
         self.span, self.segment = span, segment
         return True
 
-    def take(self, information: np.ndarray | None) -> None:
-        """Store the span's snapshot (None: nothing to solve yet); forgets what was solved before."""
+    def take(self, information: np.ndarray | None, determined: bool = False) -> None:
+        """Store the span's snapshot (None: nothing to solve yet) and whether it was determined; forgets
+        what was solved before."""
         self.information = information
+        self.determined = bool(determined)
         self.solved = None
 
     def state_dict(self) -> dict[str, Any]:
         """Checkpoint (plain lists/numbers)."""
-        return {"span": self.span, "segment": self.segment,
+        return {"span": self.span, "segment": self.segment, "determined": self.determined,
                 "information": None if self.information is None else self.information.tolist()}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore a :meth:`state_dict` checkpoint."""
         self.span, self.segment = state["span"], int(state["segment"])
         info = state["information"]
-        self.take(None if info is None else np.asarray(info, dtype=np.float64))
+        self.take(None if info is None else np.asarray(info, dtype=np.float64), bool(state.get("determined", False)))

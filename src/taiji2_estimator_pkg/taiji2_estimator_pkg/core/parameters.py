@@ -41,7 +41,7 @@ _VALIDATION = {
 
 DEFAULTS: dict[str, dict[str, Any]] = {
     "scale_factor_estimator": {
-        "layout": "type1", "method": "gls", "grs_ids": [1, 2], "gate_probability": 1e-6,
+        "layout": "type1", "method": "gls", "grs_ids": [1, 2], "gate_probability": 1e-6, "gate_refresh_s": 1.0,
         "max_bridged_gap_s": 10.0, "gap_acceleration_sigma_rad_s2": 1e-9, "snap_tolerance": 1e-10,
         "determination_margin": 20.0, "paper.window": 2001, "paper.polyorder": 2,
         "paper.initial_sigma_fraction": 0.1, "paper.gate_probability": 0.0, **_VALIDATION,
@@ -159,6 +159,7 @@ def scale_factor_options(params: Mapping[str, Any]) -> ScaleFactorOptions:
     """:class:`ScaleFactorOptions` from flat ``scale_factor_estimator`` parameters."""
     return ScaleFactorOptions(
         gate_probability=_probability(params["gate_probability"]),
+        gate_refresh_s=float(params["gate_refresh_s"]),
         max_bridged_gap_s=float(params["max_bridged_gap_s"]),
         gap_acceleration_sigma_rad_s2=float(params["gap_acceleration_sigma_rad_s2"]),
         snap_tolerance=float(params["snap_tolerance"]),

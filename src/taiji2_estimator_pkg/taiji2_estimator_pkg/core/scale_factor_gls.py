@@ -15,10 +15,12 @@ from numpy.typing import ArrayLike
 from .attitude import AttitudeIntegrator
 from .epoch_arrays import EpochArrays
 from .gate_estimate import GateEstimate, gate_estimate
+from .gate_span import GateSpan
 from .instrument import InstrumentModel
 from .kalman import chi2_gate
 from .scale_factor_estimate import ScaleFactorEstimate, StepReport
 from .scale_factor_model import ScaleFactorModel, ScaleFactorOptions
+from .small_spd import spd_solve
 from .stale_input import STALE_REASON, stale_star_tracker
 from .twostage import TwoStageFilter, solve_information
 from .validation import InputValidator, ValidationOptions, validate_batch
@@ -87,6 +89,7 @@ class ScaleFactorEstimator:
         self.n_gated_grs = 0
         self.determined = False
         self._cache: tuple[np.ndarray, np.ndarray, bool] | None = None
+        self.gate_span = GateSpan(max(1, round(self.options.gate_refresh_s * instrument.sample_rate_hz)))
         self._segments_x0: list[tuple[np.ndarray, np.ndarray]] = []
         #: input regressor and GRS of the last step with GRS data, held over steps without any
         self._held: tuple[np.ndarray, tuple[int, ...]] | None = None
@@ -139,18 +142,38 @@ class ScaleFactorEstimator:
             self._cache = (theta, cov, full and self.determined)
         return self._cache
 
-    def _gate_estimate(self) -> GateEstimate | None:
-        """The estimate from the epochs so far, for the gates of the next one (None: not determined).
+    def _gate_estimate(self, index: int) -> GateEstimate | None:
+        """The gates' estimate for the epoch at grid ``index`` (None: not determined): that of the data
+        before the first epoch of its span (core/gate_span.py), solved once per span.
 
-        Once determined, by a Cholesky factor of the information (core/gate_estimate.py: the same algebra
-        as :meth:`_solve`'s inverse, a fraction of its cost); :meth:`_solve` where it has the solution
-        already (an estimate was asked for since the last epoch), before, or where the factor fails."""
-        if self.determined and self._cache is None:
-            solved = gate_estimate(*self._total_information())
-            if solved is not None:
-                return GateEstimate(*solved)
-        theta, cov, ok = self._solve()
-        return GateEstimate.from_covariance(theta, cov) if ok else None
+        The snapshot is the total information and vector at the span's first epoch, and whether the
+        estimate was determined then (:meth:`_solve` decides it, as for a published estimate)."""
+        span = self.gate_span
+        if span.starts(index, self.filter.n_segments):
+            if self.filter.n_updates:
+                info, vector = self._total_information()
+                determined = self.determined or self._solve()[2]
+                span.take(np.column_stack((info, vector)), determined)
+            else:
+                span.take(None)
+        if span.information is None or not span.determined:
+            return None
+        if span.solved is None:
+            span.solved = (b"", self._snapshot_estimate(span.information))
+        return span.solved[1]
+
+    @staticmethod
+    def _snapshot_estimate(snapshot: np.ndarray) -> GateEstimate | None:
+        """The estimate of a snapshot ``[info | vector]`` taken once determined (None where the data then did
+        not determine every parameter: the first epochs of a new segment): by a Cholesky factor of the
+        information (core/gate_estimate.py: the same algebra as :meth:`_solve`'s inverse, a fraction of its
+        cost), by :meth:`_solve`'s eigen-decomposition where the factor fails."""
+        info, vector = snapshot[:, :-1], snapshot[:, -1]
+        solved = gate_estimate(info, vector)
+        if solved is not None:
+            return GateEstimate(*solved)
+        theta, cov, full = solve_information(info, vector)
+        return GateEstimate.from_covariance(theta, cov) if full else None
 
     def estimate(self) -> ScaleFactorEstimate:
         """Running estimate with its covariance (all GRS jointly); NaN until determined."""
@@ -347,7 +370,7 @@ class ScaleFactorEstimator:
             self._bridge(index - self.last_index - 1, (diffs, tuple(g for g in self.grs_ids if g in diffs)))
         self.last_index = index
         self.t_last_s = float(t_s)
-        estimate = self._gate_estimate()
+        estimate = self._gate_estimate(index)
         ok = estimate is not None
         present = tuple(g for g in self.grs_ids if g in diffs)
         nis_grs = float("nan")
@@ -359,7 +382,7 @@ class ScaleFactorEstimator:
                 rows = np.zeros((d_row.shape[0], self.filter.q_total))
                 rows[:, :p] = d_row
                 total = self.model.q_grs[self.grs_ids[0]] + self.model.q_grs[self.grs_ids[1]] + estimate.spread(rows)
-                nis_grs = float(resid @ np.linalg.solve(total, resid))
+                nis_grs = float(resid @ spd_solve(total, resid))
             if self.gate is not None and ok and nis_grs > self.gate:
                 self.n_gated_grs += 1  # inconsistent GRS pair: use neither at this epoch
                 rejections.append(("grs_pair", "gated"))
@@ -619,7 +642,7 @@ class ScaleFactorEstimator:
             "determined": self.determined, "last_index": self.last_index, "t0_s": self.t0_s,
             "t_last_s": self.t_last_s,
             "held": None if self._held is None else [self._held[0].tolist(), list(self._held[1])],
-            "last_grs_t_s": self.last_grs_t_s,
+            "last_grs_t_s": self.last_grs_t_s, "gate_span": self.gate_span.state_dict(),
         }
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
@@ -641,6 +664,8 @@ class ScaleFactorEstimator:
         self.last_grs_t_s = state.get("last_grs_t_s")
         self._held = None if held is None else (np.asarray(held[0], dtype=np.float64), tuple(int(g) for g in held[1]))
         self._cache = None
+        if "gate_span" in state:  # checkpoints before the gate's spans: a snapshot at the next epoch
+            self.gate_span.load_state_dict(state["gate_span"])
 
     @classmethod
     def from_state_dict(cls, instrument: InstrumentModel, state: Mapping[str, Any],

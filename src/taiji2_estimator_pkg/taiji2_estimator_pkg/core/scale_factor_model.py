@@ -4,6 +4,7 @@ section 4."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -23,6 +24,10 @@ class ScaleFactorOptions:
     ----------
     gate_probability : float or None
         False-alarm probability of the chi-square gate per update (None: no gating).
+    gate_refresh_s : float
+        Per-sample path: the gates test each epoch against the estimate of the data before the first
+        epoch of its span of this much data time, solved once per span (:mod:`.gate_span`) [s]; at most
+        one sample period: a solve at every epoch.
     max_bridged_gap_s : float
         Longest gap [s] bridged by the state prediction; longer gaps restart the attitude state.
     gap_acceleration_sigma_rad_s2 : float
@@ -38,11 +43,16 @@ class ScaleFactorOptions:
     """
 
     gate_probability: float | None = 1e-6
+    gate_refresh_s: float = 1.0
     max_bridged_gap_s: float = 10.0
     gap_acceleration_sigma_rad_s2: float = 1e-9
     snap_tolerance: float = 1e-10
     determination_margin: float = 20.0
     validation: ValidationOptions = field(default_factory=ValidationOptions)
+
+    def __post_init__(self) -> None:
+        if not (self.gate_refresh_s >= 0.0 and math.isfinite(self.gate_refresh_s)):
+            raise ValueError(f"gate_refresh_s: a finite time >= 0 [s], got {self.gate_refresh_s!r}")
 
 
 class ScaleFactorModel:

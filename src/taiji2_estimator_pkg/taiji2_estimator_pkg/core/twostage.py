@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike
 from taiji2_estimator_pkg.core.factored_steady import RegressorFactors, run_steady_factored
 from taiji2_estimator_pkg.core.first_order import first_order_recursion
 from taiji2_estimator_pkg.core.gate_estimate import GateEstimate
+from taiji2_estimator_pkg.core.small_spd import spd_inverse, spd_solve
 
 __all__ = [
     "RegularRunOutput",
@@ -342,6 +343,9 @@ class TwoStageFilter:
         self.lambda_ss = lam
         self.lambda_inv_ss = np.linalg.inv(lam)
         self.lambda_inv_ss = 0.5 * (self.lambda_inv_ss + self.lambda_inv_ss.T)
+        #: the snap test's scale max |P+_ss| and the identity of (I - K H): constants of :meth:`step`
+        self.p_post_scale = float(np.max(np.abs(self.p_post_ss)))
+        self.identity_n = np.eye(mdl.n)
         self.closed_loop = closed
         # one lfilter per conjugate pair: the partner mode is the complex conjugate
         filtered, partner = [], {}
@@ -527,7 +531,7 @@ class TwoStageFilter:
         else:
             lam = h @ self.cov @ h.T + r
             lam = 0.5 * (lam + lam.T)
-            lam_inv = np.linalg.inv(lam)
+            lam_inv = spd_inverse(lam)
         if self.evaluation:
             s = None
             post_nis = float(e0 @ lam_inv @ e0)
@@ -540,7 +544,7 @@ class TwoStageFilter:
         if estimate is not None and s is not None:
             resid = e0 - s @ estimate.theta
             total = lam + estimate.spread(s)
-            nis_value = float(resid @ np.linalg.solve(total, resid))
+            nis_value = float(resid @ spd_solve(total, resid))
         if gate is not None and np.isfinite(nis_value) and nis_value > gate:
             self.n_rejected += 1
             self.steady = False
@@ -560,7 +564,7 @@ class TwoStageFilter:
             # K = P^ H^T Lambda^-1
             gain = self.cov @ h.T @ lam_inv
             # P = (I - K H) P^ (I - K H)^T + K R K^T   (Joseph form)
-            i_kh = np.eye(mdl.n) - gain @ h
+            i_kh = self.identity_n - gain @ h
             self.cov = i_kh @ self.cov @ i_kh.T + gain @ r @ gain.T
             self.cov = 0.5 * (self.cov + self.cov.T)
         # x = x^ + K e0 ; M = M^ - K S
@@ -570,8 +574,7 @@ class TwoStageFilter:
         if not use_ss:
             self.steady = False
             if regular:
-                scale = np.max(np.abs(self.p_post_ss))
-                if np.max(np.abs(self.cov - self.p_post_ss)) <= self.snap_tolerance * scale:
+                if np.abs(self.cov - self.p_post_ss).max() <= self.snap_tolerance * self.p_post_scale:
                     self.cov = self.p_post_ss.copy()
                     self.steady = True
         return StepInfo(nis_value, yy.size, True, post_nis, self.x.copy() if self.evaluation else None)
@@ -715,8 +718,7 @@ class TwoStageFilter:
         gains = priors @ h.T[None] @ lam_inv
         i_kh = np.eye(n)[None] - gains @ h[None]
         post = i_kh @ priors @ np.swapaxes(i_kh, 1, 2) + gains @ r[None] @ np.swapaxes(gains, 1, 2)
-        scale = np.max(np.abs(self.p_post_ss))
-        close = np.max(np.abs(post - self.p_post_ss[None]), axis=(1, 2)) <= self.snap_tolerance * scale
+        close = np.max(np.abs(post - self.p_post_ss[None]), axis=(1, 2)) <= self.snap_tolerance * self.p_post_scale
         snapped = bool(np.any(close))
         count = int(np.argmax(close)) + 1 if snapped else y.shape[0]
         yc, gains, i_kh, lam_inv, post = y[:count], gains[:count], i_kh[:count], lam_inv[:count], post[:count]
