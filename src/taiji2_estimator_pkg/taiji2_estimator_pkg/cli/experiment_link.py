@@ -295,16 +295,22 @@ def run_link_experiment(args: argparse.Namespace) -> int:
         print(f"error: taiji2 experiment: --duration-s {duration_s:g} ends before the first command table can be "
               f"onboard ({start_s:g} s)", file=sys.stderr)
         return 2
+    # every relay holds its output until the readers of this graph have matched it (nodes/subscribed_publisher.py):
+    # star tracker (scale factors; the paper's d too), GRS (both estimators), executed torque, reception (this
+    # monitor, the planner); the recorder reads every ground topic
+    rec = int(bool(args.record))
+    receiver_readers = [1 + (args.method == "paper") + rec, 2 + rec, 2 + rec, rec, 2 + rec]
     commands = {
         "scale_factor_estimator": ["run", "taiji2_estimator_pkg", "scale_factor_estimator", *est_args],
         "com_offset_estimator": ["run", "taiji2_estimator_pkg", "com_offset_estimator", *est_args],
-        "ground_receiver": ["run", "taiji2_sim_pkg", "ground_receiver", "--ros-args", "-r", "__ns:=/ground"],
+        "ground_receiver": ["run", "taiji2_sim_pkg", "ground_receiver", "--ros-args", "-r", "__ns:=/ground",
+                            "-p", f"wait_for_subscribers:={receiver_readers}"],
         "space_link": ["run", "taiji2_sim_pkg", "space_link", "--ros-args", "-p", f"model:={args.link}",
                        "-p", f"seed:={link_seed}", "-p", f"missed_contacts:={[*missed, -1]}",
-                       "-p", f"lost_uplinks:={[*lost_up, -1]}"],
+                       "-p", f"lost_uplinks:={[*lost_up, -1]}", "-p", f"wait_for_subscribers:={[1 + rec, 1]}"],
         "telemetry_packetizer": ["run", "taiji2_sim_pkg", "telemetry_packetizer", "--ros-args", "-r",
                                  "__ns:=/onboard", "-p", f"end_of_data_s:={duration_s}",
-                                 "-p", "command_reports:=true"],
+                                 "-p", "command_reports:=true", "-p", "wait_for_subscribers:=[1]"],
         "onboard_executor": ["run", "taiji2_sim_pkg", "onboard_executor", "--ros-args", "-r", "__ns:=/onboard",
                              "-p", "use_sim_time:=true", "-p", "lookahead_s:=10.0",
                              "-p", f"schedule_capacity:={model.onboard_schedule_capacity}",

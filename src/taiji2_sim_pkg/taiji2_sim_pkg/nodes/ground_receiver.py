@@ -35,6 +35,7 @@ from taiji2_runtime.packets.scheduling import REPORT_APID, decode_report
 from taiji2_runtime.packets.time_correlation import TimeCorrelation
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.nodes import link_topics as lt
+from taiji2_sim_pkg.nodes.subscribed_publisher import hold_until_subscribed
 
 _NS = 1_000_000_000
 _FRAMES = {"grs1": "tmrf1", "grs2": "tmrf2"}
@@ -57,8 +58,12 @@ class GroundReceiver(rclpy.node.Node):
         topics = dict(zip(("star_tracker", "grs1", "grs2", "executed_torque"), lt.CONTRACT_TOPICS, strict=True))
         types = {"star_tracker": t.StarTracker, "grs1": t.GrsVoltages, "grs2": t.GrsVoltages,
                  "executed_torque": g.WrenchStamped}
-        self._pubs = {name: self.create_publisher(types[name], topic, qos) for name, topic in topics.items()}
-        self._reception_pub = self.create_publisher(messages.std_msgs.String, lt.RECEPTION_TOPIC, qos)
+        held = hold_until_subscribed(self, [*(self.create_publisher(types[name], topic, qos)
+                                              for name, topic in topics.items()),
+                                            self.create_publisher(messages.std_msgs.String, lt.RECEPTION_TOPIC, qos)],
+                                     ", ".join([*topics.values(), lt.RECEPTION_TOPIC]))
+        self._pubs = dict(zip(topics, held[:-1], strict=True))
+        self._reception_pub = held[-1]
         self._diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(t.SpacePackets, lt.GROUND_TM, self._on_burst, qos)
         self._ground_ns = -1

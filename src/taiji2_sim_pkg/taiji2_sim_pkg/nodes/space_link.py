@@ -30,6 +30,7 @@ from taiji2_runtime.packets.scheduling import REPORT_APID
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.link import Downlink, Uplink, load_link_model
 from taiji2_sim_pkg.nodes import link_topics as lt
+from taiji2_sim_pkg.nodes.subscribed_publisher import hold_until_subscribed
 
 _NS = 1_000_000_000
 #: packets per published burst at most
@@ -66,8 +67,9 @@ class SpaceLink(rclpy.node.Node):
         self._uplink_lost: list[dict[str, Any]] = []
         t = messages.taiji2_msgs
         qos = lt.reliable_all()
-        self._ground_tm = self.create_publisher(t.SpacePackets, lt.GROUND_TM, qos)
-        self._onboard_tc = self.create_publisher(t.SpacePackets, lt.ONBOARD_TC, qos)
+        self._ground_tm, self._onboard_tc = hold_until_subscribed(
+            self, [self.create_publisher(t.SpacePackets, lt.GROUND_TM, qos),
+                   self.create_publisher(t.SpacePackets, lt.ONBOARD_TC, qos)], f"{lt.GROUND_TM}, {lt.ONBOARD_TC}")
         self._report_pub = self.create_publisher(messages.std_msgs.String, lt.LINK_REPORT_TOPIC, lt.latched())
         self._diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(t.SpacePackets, lt.ONBOARD_TM, self._on_telemetry, qos)

@@ -23,6 +23,7 @@ from taiji2_runtime.packets.definition import STREAMS
 from taiji2_runtime.packets.packetize import encode_packet
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.nodes import link_topics as lt
+from taiji2_sim_pkg.nodes.subscribed_publisher import hold_until_subscribed
 
 _NS = 1_000_000_000
 
@@ -51,7 +52,8 @@ class TelemetryPacketizer(rclpy.node.Node):
         self._latest = [-1] * (len(STREAMS) + bool(reports))  # the sensors, the command, the reports' horizon
         self._sent_through = -1
         self._ended = False
-        self._pub = self.create_publisher(t.SpacePackets, lt.ONBOARD_TM, qos)
+        (self._pub,) = hold_until_subscribed(self, [self.create_publisher(t.SpacePackets, lt.ONBOARD_TM, qos)],
+                                             lt.ONBOARD_TM)
         self.create_subscription(t.StarTracker, lt.onboard(STREAMS[0].topic), self._on_star_tracker, qos)
         for k in (1, 2):
             self.create_subscription(t.GrsVoltages, lt.onboard(STREAMS[k].topic),
