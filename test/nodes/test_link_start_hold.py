@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+from taiji2_runtime.domain import reserve_private_domain
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.nodes.ground_receiver import GroundReceiver
 from taiji2_sim_pkg.nodes.space_link import SpaceLink
@@ -42,7 +43,27 @@ def _publish_run(source_pubs, t):
         source_pubs["command"].publish(cmd)
 
 
-def test_a_reader_that_matches_after_the_data_passed_gets_all_of_it(context, executor):
+@pytest.fixture
+def private_graph():
+    """A context and executor on a DDS domain of their own: the test counts the readers of the contract topics,
+    which any other graph on the domain would add to (under real rclpy the suite shares one domain, and nodes of
+    earlier tests can outlive their context until collected)."""
+    reservation = reserve_private_domain()
+    context = rclpy.context.Context()
+    rclpy.init(args=["test"], context=context, domain_id=reservation.domain_id)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    try:
+        yield context, executor
+    finally:
+        for node in executor.get_nodes():
+            node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown(context=context)
+        reservation.release()
+
+
+def test_a_reader_that_matches_after_the_data_passed_gets_all_of_it(private_graph):
+    context, executor = private_graph
     nodes = [TelemetryPacketizer(context=context, cli_args=["--ros-args", "-p", f"end_of_data_s:={N / 10}",
                                                             "-p", "wait_for_subscribers:=[1]"]),
              SpaceLink(context=context, cli_args=["--ros-args", "-p", "wait_for_subscribers:=[1, 0]"]),
