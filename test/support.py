@@ -23,6 +23,23 @@ def spin_until(executor: object, predicate: Callable[[], bool], timeout_s: float
     return predicate()
 
 
+def ground_reader(node: object, topics: dict[str, str], qos: object) -> tuple[dict[str, list], list[dict]]:
+    """Subscribe ``node`` to the contract ``topics`` (topic -> taiji2_msgs type name) and to the ground receiver's
+    reception records; returns (messages per topic, decoded reception records), filled as the node spins."""
+    import json
+
+    from taiji2_runtime.ros import messages
+
+    got: dict[str, list] = {topic: [] for topic in topics}
+    for topic, name in topics.items():
+        node.create_subscription(getattr(messages.taiji2_msgs, name), topic,  # type: ignore[attr-defined]
+                                 lambda m, tp=topic: got[tp].append(m), qos)
+    reception: list[dict] = []
+    node.create_subscription(messages.std_msgs.String, "/ground/link/reception",  # type: ignore[attr-defined]
+                             lambda m: reception.append(json.loads(m.data)), qos)
+    return got, reception
+
+
 def python_subprocess_env() -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONUNBUFFERED"] = "1"

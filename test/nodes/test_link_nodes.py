@@ -18,7 +18,7 @@ from taiji2_sim_pkg.nodes.ground_receiver import GroundReceiver
 from taiji2_sim_pkg.nodes.space_link import SpaceLink
 from taiji2_sim_pkg.nodes.telemetry_packetizer import TelemetryPacketizer
 
-from support import spin_until
+from support import ground_reader, spin_until
 
 N = 300  # samples of 0.1 s: 30 s of data
 MODEL = """light_time_s: 2.0
@@ -55,12 +55,7 @@ def test_link_chain_matches_the_model_and_delivers_in_order(context, executor, t
     pubs = {topic: source.create_publisher(getattr(t, name), "/onboard" + topic, qos)
             for topic, name in CONTRACT.items()}
     cmd_pub = source.create_publisher(g.WrenchStamped, "/onboard/taiji2/maneuver/command", qos)
-    got: dict[str, list] = {topic: [] for topic in CONTRACT}
-    for topic, name in CONTRACT.items():
-        observer.create_subscription(getattr(t, name), topic, lambda m, tp=topic: got[tp].append(m), qos)
-    reception: list[dict] = []
-    observer.create_subscription(messages.std_msgs.String, "/ground/link/reception",
-                                 lambda m: reception.append(json.loads(m.data)), qos)
+    got, reception = ground_reader(observer, CONTRACT, qos)
     health: list = []  # the receiver's /diagnostics statuses
     observer.create_subscription(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics",
                                  lambda m: health.extend(s for s in m.status if s.name == "ground_receiver"), qos)

@@ -16,7 +16,7 @@ from taiji2_sim_pkg.nodes.space_link import SpaceLink
 from taiji2_sim_pkg.nodes.subscribed_publisher import SubscribedPublisher
 from taiji2_sim_pkg.nodes.telemetry_packetizer import TelemetryPacketizer
 
-from support import spin_until
+from support import ground_reader, spin_until
 
 N = 100  # samples of 0.1 s
 TOPICS = {"/taiji2/star_tracker": "StarTracker", "/taiji2/grs1/voltages": "GrsVoltages",
@@ -87,12 +87,7 @@ def test_a_reader_that_matches_after_the_data_passed_gets_all_of_it(private_grap
     # a ground reader comes only now
     observer = rclpy.node.Node("late_ground_reader", context=context)
     executor.add_node(observer)
-    got: dict[str, list] = {topic: [] for topic in TOPICS}
-    for topic, name in TOPICS.items():
-        observer.create_subscription(getattr(t, name), topic, lambda m, tp=topic: got[tp].append(m), qos)
-    reception: list[dict] = []
-    observer.create_subscription(messages.std_msgs.String, "/ground/link/reception",
-                                 lambda m: reception.append(json.loads(m.data)), qos)
+    got, reception = ground_reader(observer, TOPICS, qos)
     assert spin_until(executor, lambda: bool(reception) and reception[-1]["end_of_data"], timeout_s=60.0)
     final = reception[-1]["counts"]
     assert spin_until(executor, lambda: all(len(got[tp]) == final[s]["released"] for tp, s in

@@ -18,6 +18,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from taiji2_runtime.node_parameters import read_only
+from taiji2_runtime.ros import rclpy
+
 __all__ = ["SubscribedPublisher"]
 
 
@@ -69,9 +72,6 @@ def hold_until_subscribed(node: Any, publishers: list[Any], topics: str) -> list
     ValueError
         If the parameter does not give one count >= 0 per publisher.
     """
-    from taiji2_runtime.node_parameters import read_only
-    from taiji2_runtime.ros import rclpy
-
     counts = list(node.declare_parameter("wait_for_subscribers", [0] * len(publishers), read_only(
         f"hold the output until this many subscribers have matched each of {topics} (0: publish at once)")).value)
     if len(counts) != len(publishers) or any(int(c) < 0 for c in counts):
