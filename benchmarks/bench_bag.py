@@ -29,11 +29,11 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import Reader
 
+from taiji2_model.config import load_config
 from taiji2_runtime.bag.bulk_decode import encode_messages
 from taiji2_runtime.bag.provenance import simulator_provenance
 from taiji2_runtime.bag.writer import BagWriter
 from taiji2_runtime.interfaces import typestore
-from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import Simulator, maneuver_torque_commands
 
 REPO = Path(__file__).resolve().parents[1]
@@ -120,7 +120,7 @@ def live(workdir, minutes, rate, storage):
     topics = [*RAW, "/clock"]
     original = _messages_by_topic(bag)
     env = _env()
-    cli = [sys.executable, "-m", "taiji2_runtime.cli.main", "bag"]
+    cli = [sys.executable, "-m", "taiji2_apps.cli.main", "bag"]
     for label, speed in ((f"--rate {rate:g}", ["--rate", str(rate)]), ("--fast", ["--fast"])):
         out = workdir / f"recorded_{label.strip('-').replace(' ', '_')}"
         recorder = subprocess.Popen([*cli, "record", *topics, "-o", str(out), "-s", storage], env=env,

@@ -45,7 +45,7 @@ from taiji2_estimator_pkg.core.instrument import InstrumentModel  # noqa: E402
 from taiji2_estimator_pkg.io import load_raw_bag  # noqa: E402
 
 BAGS = ("recorder", "rosbags-mcap", "rosbags-sqlite3", "ground-segment-mcap")
-TAIJI2 = [sys.executable, "-m", "taiji2_runtime.cli.main"]
+TAIJI2 = [sys.executable, "-m", "taiji2_apps.cli.main"]
 BASELINE_SCRIPT = """
 import sys
 sys.path.insert(0, {test!r})
@@ -69,7 +69,7 @@ def write_bags(root: Path, duration_s: float, names: list[str]) -> dict[str, Pat
     from bench_bag import write_experiment_bag
     from foreign_bags import write_foreign_bag
 
-    from taiji2_sim_pkg.core.config import load_config
+    from taiji2_model.config import load_config
     from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
     from contract_bags import simulated_data, write_ground_segment_bag

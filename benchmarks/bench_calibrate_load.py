@@ -38,7 +38,7 @@ from bench_calibrate import BAGS, BASELINE_SCRIPT, PROCESS_ENV, REPO, TAIJI2, ti
 HOG = "while True: pass"
 THREADS_SCRIPT = """
 import json, sys
-from taiji2_runtime.cli.main import main
+from taiji2_apps.cli.main import main
 import contextlib, io
 with contextlib.redirect_stdout(io.StringIO()):
     status = main(["calibrate", sys.argv[1], "--layout", "type1", "--json"])

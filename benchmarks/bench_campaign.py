@@ -48,9 +48,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from taiji2_estimator_pkg.campaign import engine
-from taiji2_estimator_pkg.campaign.case import run_case
-from taiji2_estimator_pkg.campaign.spec import expand_cases, load_spec
+from taiji2_apps.campaign import engine
+from taiji2_apps.campaign.case import run_case
+from taiji2_apps.campaign.spec import expand_cases, load_spec
 
 ERROR_MARKERS = ("Traceback", "Error", "Exception", "WARNING", "Warning")
 

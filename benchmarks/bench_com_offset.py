@@ -31,10 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from taiji2_estimator_pkg.campaign.engine import run_campaign
-from taiji2_estimator_pkg.campaign.spec import load_spec
-from taiji2_estimator_pkg.campaign.store import read_rows
-from taiji2_estimator_pkg.campaign.summary import summarize_table
+from taiji2_apps.campaign.engine import run_campaign
+from taiji2_apps.campaign.spec import load_spec
+from taiji2_apps.campaign.store import read_rows
+from taiji2_apps.campaign.summary import summarize_table
 
 NOMINAL_FORCE_ASD = 1.0e-7
 STUDIES = ("own", "reference", "force2x", "bound")
@@ -77,8 +77,8 @@ def _bound_study(designs: list[str]) -> None:
     from taiji2_estimator_pkg.core.crlb import crlb
     from taiji2_estimator_pkg.core.instrument import InstrumentModel
     from taiji2_estimator_pkg.core.pipeline import calibrate
-    from taiji2_sim_pkg.core.config import NOISE_SOURCE_NAMES, load_config
-    from taiji2_sim_pkg.core.maneuver_families import load_maneuver_file
+    from taiji2_model.config import NOISE_SOURCE_NAMES, load_config
+    from taiji2_model.maneuver_families import load_maneuver_file
     from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
     print("\n=== bound: reported sigma of d / full bound, one 3-h record (goal <= 1.03) ===")

@@ -19,8 +19,8 @@ def one(layout: str, maneuver_file: str, seed: int) -> dict:
     """Errors, sigmas and range peaks of one seed (all noises on)."""
     from taiji2_estimator_pkg.core.instrument import InstrumentModel
     from taiji2_estimator_pkg.core.pipeline import calibrate
-    from taiji2_sim_pkg.core.config import load_config
-    from taiji2_sim_pkg.core.maneuver_families import load_maneuver_file
+    from taiji2_model.config import load_config
+    from taiji2_model.maneuver_families import load_maneuver_file
     from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
     maneuver = load_maneuver_file(maneuver_file)
@@ -43,9 +43,9 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=None, help="local Dask workers (default: one per core)")
     parser.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
     args = parser.parse_args()
-    from taiji2_estimator_pkg.campaign.engine import connect
-    from taiji2_estimator_pkg.design.evaluate import PARAMETER_NAMES, DesignProblem
-    from taiji2_sim_pkg.core.maneuver_families import load_maneuver_file
+    from taiji2_apps.campaign.engine import connect
+    from taiji2_apps.design.evaluate import PARAMETER_NAMES, DesignProblem
+    from taiji2_model.maneuver_families import load_maneuver_file
 
     client, cluster = connect(args.scheduler, args.workers)
     try:

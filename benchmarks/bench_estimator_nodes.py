@@ -35,7 +35,7 @@ NOMINAL_G = (5.524e-8, 5.524e-8, 7.365e-8)
 
 
 def _experiment(duration_s: float):
-    from taiji2_sim_pkg.core.config import load_config
+    from taiji2_model.config import load_config
     from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
     n = round(duration_s * 10)

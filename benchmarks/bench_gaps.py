@@ -18,7 +18,7 @@ import numpy as np
 
 from taiji2_estimator_pkg.calibration import align_streams, calibrate
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
-from taiji2_sim_pkg.core.config import load_config
+from taiji2_model.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 

@@ -36,7 +36,7 @@ import numpy as np
 
 from taiji2_estimator_pkg.calibration import align_streams, calibrate
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
-from taiji2_sim_pkg.core.config import load_config
+from taiji2_model.config import load_config
 from taiji2_sim_pkg.core.link import Downlink, load_link_model
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
@@ -231,7 +231,7 @@ def graph(args: argparse.Namespace) -> None:
     out = Path(args.out or tempfile.mkdtemp(prefix="bench-link-"))
     bag = out / "ground_bag"
     env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "74"))
-    cmd = [sys.executable, "-m", "taiji2_runtime.cli.main", "experiment", "--link", "deep_space", "--layout", "type1",
+    cmd = [sys.executable, "-m", "taiji2_apps.cli.main", "experiment", "--link", "deep_space", "--layout", "type1",
            "--duration-s", str(args.graph_duration_s), "--record", str(bag), "--out", str(out / "run"), "--json",
            "--timeout-s", "20000"]
     started = time.monotonic()
@@ -258,7 +258,7 @@ def graph(args: argparse.Namespace) -> None:
     octets = {"star_tracker": 120, "grs1": 64, "grs2": 64, "executed_torque": 64}
     rate_in = sum(8 * (octets[k] + model.packet_overhead_octets) * 10 for k in octets if k in streams)
     requirement_times_vs_offline(link, bag, model, rate_in)
-    off = subprocess.run([sys.executable, "-m", "taiji2_runtime.cli.main", "calibrate", str(bag), "--json"],
+    off = subprocess.run([sys.executable, "-m", "taiji2_apps.cli.main", "calibrate", str(bag), "--json"],
                          capture_output=True, text=True, env=env)
     if off.returncode != 0:
         print(off.stderr[-2000:])

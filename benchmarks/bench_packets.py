@@ -31,12 +31,12 @@ sys.path.insert(0, str(REPO / "test" / "packets"))
 
 import numpy as np  # noqa: E402
 
-TAIJI2 = [sys.executable, "-m", "taiji2_runtime.cli.main"]
+TAIJI2 = [sys.executable, "-m", "taiji2_apps.cli.main"]
 PROCESS_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
 
 def simulated_streams(duration_s: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    from taiji2_sim_pkg.core.config import load_config
+    from taiji2_model.config import load_config
     from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
     from contract_bags import simulated_data

@@ -42,7 +42,7 @@ AXES = ("x", "y", "z")
 
 
 def run_graph(layout: str, method: str, duration_s: float, seed: int) -> dict:
-    cmd = [sys.executable, "-m", "taiji2_runtime.cli.main", "experiment", "--layout", layout, "--method", method,
+    cmd = [sys.executable, "-m", "taiji2_apps.cli.main", "experiment", "--layout", layout, "--method", method,
            "--maneuver", "paper", "--duration-s", str(duration_s), "--seed", str(seed), "--json"]
     started = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=6 * 3600)
@@ -86,10 +86,10 @@ def monte_carlo(layouts: list[str], seeds: int, duration_s: float, workers: int)
     import tempfile
     from pathlib import Path
 
-    from taiji2_estimator_pkg.campaign.engine import run_campaign
-    from taiji2_estimator_pkg.campaign.spec import load_spec
-    from taiji2_estimator_pkg.campaign.store import read_rows
-    from taiji2_estimator_pkg.campaign.summary import format_summary, summarize_table
+    from taiji2_apps.campaign.engine import run_campaign
+    from taiji2_apps.campaign.spec import load_spec
+    from taiji2_apps.campaign.store import read_rows
+    from taiji2_apps.campaign.summary import format_summary, summarize_table
 
     spec = load_spec({"name": "reproduction_mc", "layouts": layouts, "durations_s": [duration_s],
                       "seeds": {"start": 1000, "count": seeds}, "methods": ["gls", "paper"],

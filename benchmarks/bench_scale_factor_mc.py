@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from taiji2_estimator_pkg.campaign.engine import run_campaign
-from taiji2_estimator_pkg.campaign.spec import load_spec
-from taiji2_estimator_pkg.campaign.store import read_rows
-from taiji2_estimator_pkg.campaign.summary import format_summary, summarize_table
+from taiji2_apps.campaign.engine import run_campaign
+from taiji2_apps.campaign.spec import load_spec
+from taiji2_apps.campaign.store import read_rows
+from taiji2_apps.campaign.summary import format_summary, summarize_table
 
 
 def main() -> None:

@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from taiji2_sim_pkg.core.config import load_config
+from taiji2_model.config import load_config
 from taiji2_sim_pkg.core.range_check import peak_linear_report
 from taiji2_sim_pkg.core.simulator import Simulator, maneuver_torque_commands, simulate_batch
 

@@ -21,8 +21,8 @@ import time
 os.environ.setdefault("TAIJI2_RUNTIME", "cyclonedds")
 os.environ.setdefault("ROS_DOMAIN_ID", str(120 + os.getpid() % 50))
 
+from taiji2_model.config import load_config
 from taiji2_runtime.ros import messages, rclpy
-from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import Simulator, maneuver_torque_commands
 
 TOPICS = {
@@ -41,7 +41,7 @@ TOPICS = {
 
 
 def _spawn(*argv: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "taiji2_runtime.cli.main", *argv],
+    return subprocess.Popen([sys.executable, "-m", "taiji2_apps.cli.main", *argv],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 

@@ -49,7 +49,7 @@ READER = textwrap.dedent("""
 
 def _sim(duration_s: float, subscribers: int) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "taiji2_runtime.cli.main", "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args",
+        [sys.executable, "-m", "taiji2_apps.cli.main", "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args",
          "-p", f"duration_s:={duration_s}", "-p", "sync_with_command:=false", "-p", "seed:=1",
          "-p", "publish_truth:=false", "-p", f"wait_for_subscribers:=[{subscribers}, 0, 0]",
          "-p", "config_overrides:=" + f'["maneuver.duration_s={duration_s}"]'],

@@ -49,7 +49,7 @@ def python_subprocess_env() -> dict[str, str]:
 def run_taiji2(*argv: str, cwd: str | None = None, env: dict[str, str] | None = None,
                timeout: float = 120) -> subprocess.CompletedProcess:
     """``taiji2 ARGV`` in a subprocess of this interpreter; its output captured as text."""
-    return subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", *argv], env=env or python_subprocess_env(),
+    return subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", *argv], env=env or python_subprocess_env(),
                           capture_output=True, text=True, timeout=timeout, cwd=cwd)
 
 

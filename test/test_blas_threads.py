@@ -61,7 +61,7 @@ VERBS = {
 @pytest.mark.parametrize("verb", sorted(VERBS))
 def test_every_verb_applies_the_policy_first(monkeypatch, verb):
     import taiji2_runtime.threads
-    from taiji2_runtime.cli.main import main as taiji2
+    from taiji2_apps.cli.main import main as taiji2
 
     def applied(threads: int | None = None) -> int:
         raise _Applied

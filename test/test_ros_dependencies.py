@@ -1,6 +1,6 @@
 """package.xml declares only dependencies rosdep resolves, and with requirements-ros.txt they cover every
 third-party import of the packages (issue 26 row 6). The route itself (rosdep's packages + the README's pip
-command, then ``ros2 run taiji2_runtime taiji2 calibrate``) runs in test/rclpy/test_ros_install_route.py."""
+command, then ``ros2 run taiji2_apps taiji2 calibrate``) runs in test/rclpy/test_ros_install_route.py."""
 
 from __future__ import annotations
 

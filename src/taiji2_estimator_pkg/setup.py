@@ -18,18 +18,9 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
     ],
     package_data={PACKAGE: ["py.typed"]},
-    install_requires=["numpy", "scipy", "PyYAML", "matplotlib", "taiji2_runtime", "taiji2_sim_pkg"],
+    install_requires=["numpy", "scipy", "PyYAML", "matplotlib", "taiji2_model", "taiji2_runtime"],
     python_requires=">=3.10",
     entry_points={
-        "taiji2.commands": [
-            "experiment = taiji2_estimator_pkg.cli.experiment",
-            "calibrate = taiji2_estimator_pkg.cli.calibrate",
-            "diagnose = taiji2_estimator_pkg.cli.diagnose",
-            "plot = taiji2_estimator_pkg.cli.plot",
-            "campaign = taiji2_estimator_pkg.cli.campaign",
-            "design = taiji2_estimator_pkg.cli.design",
-            "simulate = taiji2_estimator_pkg.cli.simulate",
-        ],
         "console_scripts": ["scale_factor_estimator = taiji2_estimator_pkg.nodes.scale_factor_estimator:main", "com_offset_estimator = taiji2_estimator_pkg.nodes.com_offset_estimator:main"],
     },
 )

@@ -18,7 +18,6 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
     ],
     package_data={PACKAGE: ["py.typed"]},
-    install_requires=["numpy", "PyYAML", "rosbags", "cyclonedds", "threadpoolctl", "spacepackets"],
+    install_requires=["numpy", "PyYAML", "taiji2_model", "rosbags", "cyclonedds", "threadpoolctl", "spacepackets"],
     python_requires=">=3.10",
-    entry_points={"console_scripts": ["taiji2 = taiji2_runtime.cli.main:main"]},
 )

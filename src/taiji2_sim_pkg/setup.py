@@ -16,10 +16,9 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
-        (f"share/{PACKAGE}/config/maneuvers", glob("config/maneuvers/*.yaml")),
     ],
     package_data={PACKAGE: ["py.typed"]},
-    install_requires=["numpy", "scipy", "PyYAML", "taiji2_runtime"],
+    install_requires=["numpy", "scipy", "PyYAML", "taiji2_model", "taiji2_runtime"],
     python_requires=">=3.10",
-    entry_points={"console_scripts": ["maneuver_commander = taiji2_sim_pkg.nodes.maneuver_commander:main", "spacecraft_sim = taiji2_sim_pkg.nodes.spacecraft_sim:main", "telemetry_packetizer = taiji2_sim_pkg.nodes.telemetry_packetizer:main", "space_link = taiji2_sim_pkg.nodes.space_link:main", "ground_receiver = taiji2_sim_pkg.nodes.ground_receiver:main", "onboard_executor = taiji2_sim_pkg.nodes.onboard_executor:main", "command_planner = taiji2_sim_pkg.nodes.command_planner:main"]},
+    entry_points={"console_scripts": ["maneuver_commander = taiji2_sim_pkg.nodes.maneuver_commander:main", "spacecraft_sim = taiji2_sim_pkg.nodes.spacecraft_sim:main", "telemetry_packetizer = taiji2_sim_pkg.nodes.telemetry_packetizer:main", "space_link = taiji2_sim_pkg.nodes.space_link:main", "onboard_executor = taiji2_sim_pkg.nodes.onboard_executor:main"]},
 )

@@ -57,7 +57,7 @@ def _env():
 
 
 def _taiji2(*args):
-    return [PYTHON, "-m", "taiji2_runtime.cli.main", *args]
+    return [PYTHON, "-m", "taiji2_apps.cli.main", *args]
 
 
 def _listed_messages(bag: Path) -> int:

@@ -243,7 +243,7 @@ def test_cli_bad_bags_one_line_no_traceback(tmp_path, case, verb):
     make(path)
     env = python_subprocess_env()
     env["ROS_DOMAIN_ID"] = os.environ["ROS_DOMAIN_ID"]
-    result = subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", "bag", verb, str(path)],
+    result = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "bag", verb, str(path)],
                             capture_output=True, text=True, timeout=60, env=env)
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()

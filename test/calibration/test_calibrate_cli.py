@@ -10,7 +10,7 @@ import pytest
 
 from taiji2_estimator_pkg.calibration import align_streams, calibrate
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
-from taiji2_sim_pkg.core.config import load_config
+from taiji2_model.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 from contract_bags import simulated_data, write_ground_segment_bag
@@ -34,7 +34,7 @@ def contract_bag(tmp_path_factory, simulated):
 
 
 def _calibrate(*args):
-    return subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", "calibrate", *map(str, args)],
+    return subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "calibrate", *map(str, args)],
                           env=python_subprocess_env(), capture_output=True, text=True, timeout=300)
 
 

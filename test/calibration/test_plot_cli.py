@@ -10,7 +10,7 @@ FIGURES = ("angular_acceleration_fit", "scale_factors_vs_time", "com_offsets_vs_
 
 
 def test_plot_writes_png_figures(tmp_path):
-    proc = subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", "plot", "--duration-s", "1200", "--out",
+    proc = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "plot", "--duration-s", "1200", "--out",
                            str(tmp_path)], env=python_subprocess_env(), capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     for name in FIGURES:

@@ -84,7 +84,7 @@ def test_range_warning_tells_noise_peaks_from_a_maneuver_out_of_range():
 
 @pytest.fixture(scope="module")
 def plans():
-    from taiji2_estimator_pkg.experiment_setup import plan_experiment
+    from taiji2_apps.experiment_setup import plan_experiment
 
     return {kind: plan_experiment("type1", "", kind, None, [], 1, "gls") for kind in ("design", "paper")}
 
@@ -92,7 +92,7 @@ def plans():
 def test_the_default_maneuver_meets_every_requirement_by_its_bound_and_the_paper_preset_does_not(plans):
     """The README's main job shows success: the shipped design's full bound is within every requirement in
     its 3 h (0.604 of the d_y requirement at most); the paper's preset is 1.48x on d_z (docs/maneuver_design.md)."""
-    from taiji2_estimator_pkg.design.evaluate import PARAMETER_NAMES, DesignProblem, requirement_ratios
+    from taiji2_apps.design.evaluate import PARAMETER_NAMES, DesignProblem, requirement_ratios
 
     for kind, worst, name in (("design", 0.604, "grs1.d_y"), ("paper", 1.480, "grs1.d_z")):
         plan = plans[kind]

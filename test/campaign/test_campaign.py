@@ -10,10 +10,10 @@ import sys
 
 import pytest
 
-from taiji2_estimator_pkg.campaign.case import PARAMETERS
-from taiji2_estimator_pkg.campaign.engine import run_campaign
-from taiji2_estimator_pkg.campaign.spec import SpecError, expand_cases, load_spec
-from taiji2_estimator_pkg.campaign.store import chunk_files, read_rows
+from taiji2_apps.campaign.case import PARAMETERS
+from taiji2_apps.campaign.engine import run_campaign
+from taiji2_apps.campaign.spec import SpecError, expand_cases, load_spec
+from taiji2_apps.campaign.store import chunk_files, read_rows
 
 # Short cases: the engine, not the statistics, is under test (300 s of data per case).
 SMALL = {"name": "test", "layouts": ["type1"], "durations_s": [300.0], "seeds": {"start": 1, "count": 6},
@@ -93,7 +93,7 @@ def test_failing_case_is_recorded_and_the_campaign_goes_on(tmp_path):
     layout = tmp_path / "gone.yaml"
     import yaml
 
-    from taiji2_sim_pkg.core.config import load_config
+    from taiji2_model.config import load_config
 
     layout.write_text(yaml.safe_dump(load_config("type1").to_dict()))
     spec = load_spec({**SMALL, "seeds": [1, 2], "layouts": ["type1", str(layout)]})
@@ -125,7 +125,7 @@ def test_bad_spec_names_the_key(spec, key):
 def test_cli_bad_spec_and_unreachable_scheduler_are_one_line(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: x\nseedz: [1]\n")
-    cmd = [sys.executable, "-m", "taiji2_runtime.cli.main", "campaign"]
+    cmd = [sys.executable, "-m", "taiji2_apps.cli.main", "campaign"]
     proc = subprocess.run([*cmd, str(bad)], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "seedz" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
     good = tmp_path / "good.yaml"
@@ -139,7 +139,7 @@ def test_cli_bad_spec_and_unreachable_scheduler_are_one_line(tmp_path):
 def test_summarize_writes_table_and_plots(tmp_path):
     spec = load_spec({**SMALL, "seeds": {"start": 1, "count": 3}})
     run_campaign(spec, tmp_path, workers=2, progress=None)
-    proc = subprocess.run([sys.executable, "-m", "taiji2_runtime.cli.main", "campaign", "summarize", str(tmp_path)],
+    proc = subprocess.run([sys.executable, "-m", "taiji2_apps.cli.main", "campaign", "summarize", str(tmp_path)],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "grs1.G_Pphi" in proc.stdout and "std/CRLB" in proc.stdout
@@ -148,7 +148,7 @@ def test_summarize_writes_table_and_plots(tmp_path):
 
 
 def test_cases_are_deterministic_for_their_seed():
-    from taiji2_estimator_pkg.campaign.case import run_case
+    from taiji2_apps.campaign.case import run_case
 
     case = expand_cases(load_spec({**SMALL, "seeds": [3]}))[0]
     first, second = run_case(case), run_case(case)
@@ -162,8 +162,8 @@ def test_reference_fidelity_and_model_overrides_reach_the_case():
     # data from the reference simulator with 2x the force-noise PSD, estimators on the nominal budget:
     # the rows say so, the bound is the data's (the same layout with the 2x budget) and the grouping
     # and hash tell the cases apart; a spec without these keys keeps its former case hashes
-    from taiji2_estimator_pkg.campaign.case import run_case
-    from taiji2_estimator_pkg.campaign.spec import case_hash
+    from taiji2_apps.campaign.case import run_case
+    from taiji2_apps.campaign.spec import case_hash
 
     plain = expand_cases(load_spec({**SMALL, "seeds": [3], "durations_s": [1200]}))[0]
     body = {k: v for k, v in plain.items() if k not in ("fidelity", "model_overrides", "group", "case_hash")}

@@ -8,14 +8,14 @@ import sys
 
 import pytest
 
-from taiji2_estimator_pkg.campaign.engine import run_campaign
-from taiji2_estimator_pkg.campaign.spec import load_spec
+from taiji2_apps.campaign.engine import run_campaign
+from taiji2_apps.campaign.spec import load_spec
 
 # Page faults of 200 allocations of a 2.6 MB array (a 3-h (n, 3) series), each written and freed.
 _CHURN = """
 import resource, sys
 import numpy as np
-from taiji2_estimator_pkg.campaign.worker import restore_allocator_thresholds
+from taiji2_apps.campaign.worker import restore_allocator_thresholds
 restored = restore_allocator_thresholds() if sys.argv[1] == "restore" else None
 a = np.ones((108000, 3))
 before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
@@ -74,8 +74,8 @@ def test_workers_have_no_trim_threshold_and_the_callers_environment_is_kept(tmp_
 def test_cluster_starts_and_closes_without_tracebacks(tmp_path):
     """Start, run and close in a fresh process with 4 workers: stderr (workers included) is empty."""
     code = f"""
-from taiji2_estimator_pkg.campaign.engine import run_campaign
-from taiji2_estimator_pkg.campaign.spec import load_spec
+from taiji2_apps.campaign.engine import run_campaign
+from taiji2_apps.campaign.spec import load_spec
 if __name__ == "__main__":
     for r in range(2):
         spec = load_spec({{"name": "close", "layouts": ["type1"], "durations_s": [30.0],
@@ -93,7 +93,7 @@ def test_the_setup_quiets_the_event_loop_of_a_worker_started_with_dasks_defaults
     # a worker of an existing cluster (`dask worker`) runs the sampling profiler and a 20-ms tick
     from tornado.ioloop import PeriodicCallback
 
-    from taiji2_estimator_pkg.campaign.worker import quiet_event_loop
+    from taiji2_apps.campaign.worker import quiet_event_loop
 
     class Worker:
         def __init__(self) -> None:

@@ -29,7 +29,7 @@ def _one_error_line(proc: subprocess.CompletedProcess) -> str:
 # -- row 3: taiji2 experiment checks its arguments before it starts a node ------------------------------
 
 def _in_process(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    from taiji2_runtime.cli.main import main
+    from taiji2_apps.cli.main import main
 
     status = main(argv)
     out, err = capsys.readouterr()
@@ -75,8 +75,8 @@ def test_experiment_refuses_an_existing_record_bag(tmp_path):
 
 
 def test_a_failed_node_is_reported_with_its_own_error_line(tmp_path):
-    from taiji2_estimator_pkg.cli.experiment import _node_failure
-    from taiji2_estimator_pkg.experiment_setup import node_error_line
+    from taiji2_apps.cli.experiment import _node_failure
+    from taiji2_apps.experiment_setup import node_error_line
 
     log = tmp_path / "com_offset_estimator.log"
     log.write_text("[INFO] [1.0] [com_offset_estimator]: method gls\n"
@@ -94,7 +94,7 @@ def test_a_failed_node_is_reported_with_its_own_error_line(tmp_path):
 
 
 def test_experiment_default_maneuver_is_the_shipped_design_and_paper_is_the_preset():
-    from taiji2_estimator_pkg.experiment_setup import plan_experiment
+    from taiji2_apps.experiment_setup import plan_experiment
 
     plan = plan_experiment("type1", "", None, None, [], 1, "gls")
     assert plan.maneuver_kind == "design" and plan.maneuver_file.endswith("maneuvers/type1.yaml")
@@ -173,12 +173,12 @@ def test_calibrate_table_has_no_truth_columns_without_truth():
 
 
 def test_diagnose_says_what_shrink_is():
-    from taiji2_estimator_pkg.cli.diagnose import _share
+    from taiji2_apps.cli.diagnose import _share
 
     assert _share(1.0) == "100 %" and _share(0.456) == "46 %" and _share(None) == "-"
     import inspect
 
-    from taiji2_estimator_pkg.cli import diagnose
+    from taiji2_apps.cli import diagnose
 
     assert "the part of the gap at its locations that it closes; held-out" in inspect.getsource(diagnose.main)
 
@@ -232,7 +232,7 @@ def test_run_help_and_package_listing():
 
 
 def test_every_verb_help_is_plain_text_and_every_option_explained():
-    from taiji2_runtime.cli.main import build_parser
+    from taiji2_apps.cli.main import build_parser
 
     parser = build_parser()
     verbs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
@@ -252,7 +252,7 @@ def test_every_verb_help_is_plain_text_and_every_option_explained():
 # -- row 8: outputs go to one documented place -------------------------------------------------------------
 
 def test_default_outputs_go_under_taiji2_out():
-    from taiji2_runtime.cli.main import build_parser
+    from taiji2_apps.cli.main import build_parser
 
     parser = build_parser()
     assert parser.parse_args(["diagnose", "BAG"]).out == "taiji2_out/diagnosis"

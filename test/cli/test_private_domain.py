@@ -45,7 +45,7 @@ def test_a_domain_with_a_participant_on_this_host_is_skipped(tmp_path):
 
 
 def test_an_explicit_ros_domain_id_is_kept(monkeypatch):
-    from taiji2_estimator_pkg.cli.experiment import _private_domain
+    from taiji2_apps.cli.experiment import _private_domain
 
     monkeypatch.setenv("ROS_DOMAIN_ID", "97")
     assert _private_domain() is None and os.environ["ROS_DOMAIN_ID"] == "97"

@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from taiji2_estimator_pkg.design.evaluate import PARAMETER_NAMES, DesignProblem
-from taiji2_estimator_pkg.design.families import family
-from taiji2_estimator_pkg.design.optimize import Constraints, project
-from taiji2_runtime.cli.main import main as taiji2
-from taiji2_sim_pkg.core.maneuver_families import (
+from taiji2_apps.cli.main import main as taiji2
+from taiji2_apps.design.evaluate import PARAMETER_NAMES, DesignProblem
+from taiji2_apps.design.families import family
+from taiji2_apps.design.optimize import Constraints, project
+from taiji2_model.maneuver_families import (
     MultisineManeuver,
     PiecewiseManeuver,
     load_maneuver_file,
@@ -83,7 +83,7 @@ def test_infeasible_constraints_give_one_line_naming_the_constraint(tmp_path, ca
     PiecewiseManeuver(31.3, [[1e-6, 0, -2e-6], [-1e-6, 5e-6, 0], [0, -5e-6, 2e-6]], 0.0, 900.0),
 ])
 def test_maneuver_file_round_trips_through_the_commander_and_the_sim_core(tmp_path, context, maneuver):
-    from taiji2_sim_pkg.core.config import load_config
+    from taiji2_model.config import load_config
     from taiji2_sim_pkg.nodes.maneuver_commander import ManeuverCommander
 
     path = tmp_path / "m.yaml"
@@ -102,7 +102,7 @@ def test_maneuver_file_round_trips_through_the_commander_and_the_sim_core(tmp_pa
 
 
 def test_bad_maneuver_file_is_one_line_naming_the_key(tmp_path):
-    from taiji2_sim_pkg.core.config import ConfigError
+    from taiji2_model.config import ConfigError
 
     path = tmp_path / "bad.yaml"
     path.write_text("family: multisine\nmultisine: {frequencies_hz: [0.01], amplitude_n_m: [[1, 2]]}\n")
@@ -135,7 +135,7 @@ def test_a_spent_budget_evaluates_no_more_candidates(problem):
     """The wall-clock cap is checked before every evaluation, not only once per generation (a
     generation of the square family is 32 candidates of a bound each): with no time nothing is
     evaluated, the search returns its start, the paper's preset, and says it was truncated."""
-    from taiji2_estimator_pkg.design.optimize import optimize
+    from taiji2_apps.design.optimize import optimize
 
     lines: list[str] = []
     result = optimize(problem, "square", 1000.0, Constraints(), seed=1, budget_s=0.0, progress=lines.append)
@@ -158,7 +158,7 @@ def test_same_seed_gives_the_same_design_however_slow_the_clock(problem, monkeyp
     times slower), as long as the wall-clock cap is not hit; when it is, the result says truncated."""
     import types
 
-    import taiji2_estimator_pkg.design.optimize as optimize_module
+    import taiji2_apps.design.optimize as optimize_module
 
     search = {"seed": 5, "max_evaluations": 14, "generations": 1, "progress": lambda line: None}
     idle = optimize_module.optimize(problem, "square", 1000.0, Constraints(), **search)
@@ -191,7 +191,7 @@ def test_same_seed_gives_the_same_design_beside_cpu_bound_processes(problem):
     BLAS thread, as `taiji2 design` runs it)."""
     from threadpoolctl import threadpool_limits
 
-    from taiji2_estimator_pkg.design.optimize import optimize
+    from taiji2_apps.design.optimize import optimize
 
     search = {"seed": 6, "max_evaluations": 14, "generations": 1, "progress": lambda line: None}
     with threadpool_limits(limits=1, user_api="blas"):
@@ -205,8 +205,8 @@ def test_same_seed_gives_the_same_design_beside_cpu_bound_processes(problem):
 def test_cli_search_defaults_are_the_optimizers():
     import argparse
 
-    from taiji2_estimator_pkg.cli import design as design_cli
-    from taiji2_estimator_pkg.design.optimize import GENERATIONS, MAX_EVALUATIONS
+    from taiji2_apps.cli import design as design_cli
+    from taiji2_apps.design.optimize import GENERATIONS, MAX_EVALUATIONS
 
     parser = argparse.ArgumentParser()
     design_cli.add_arguments(parser)

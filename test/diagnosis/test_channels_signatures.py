@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taiji2_sim_pkg.core.config import load_config
-from taiji2_sim_pkg.core.effect_catalog import make_effect
+from taiji2_model.config import load_config
+from taiji2_model.effect_catalog import make_effect
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 try:

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taiji2_sim_pkg.core.config import load_config
-from taiji2_sim_pkg.core.effect_catalog import make_effect
+from taiji2_model.config import load_config
+from taiji2_model.effect_catalog import make_effect
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 try:
@@ -19,7 +19,7 @@ try:
 except ImportError:  # an editable install made before the package had modules
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "src" / "taiji2_estimator_pkg"))
 
-from taiji2_estimator_pkg.cli import diagnose as verb
+from taiji2_apps.cli import diagnose as verb
 from taiji2_estimator_pkg.diagnosis import InputError, align_streams, commands_on_grid, prepare_input
 
 

@@ -12,9 +12,9 @@ import pytest
 
 from taiji2_estimator_pkg.diagnosis import diagnose, prepare_input
 from taiji2_estimator_pkg.diagnosis.candidates import ONSET_KINDS
-from taiji2_sim_pkg.core.config import load_config
-from taiji2_sim_pkg.core.effect_catalog import EFFECTS, make_effect
-from taiji2_sim_pkg.core.effects import Effect
+from taiji2_model.config import load_config
+from taiji2_model.effect_catalog import EFFECTS, make_effect
+from taiji2_model.effects import Effect
 from taiji2_sim_pkg.core.reference import simulate_reference
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 

@@ -22,8 +22,8 @@ from taiji2_estimator_pkg.diagnosis.engine import DiagnosisOptions, _settings, _
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 from taiji2_estimator_pkg.diagnosis.onset import onset_posterior
 from taiji2_estimator_pkg.diagnosis.record import Record, calibrate
-from taiji2_sim_pkg.core.config import load_config
-from taiji2_sim_pkg.core.effect_catalog import make_effect
+from taiji2_model.config import load_config
+from taiji2_model.effect_catalog import make_effect
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 DRAWS = 30

@@ -15,7 +15,7 @@ CONTRACT = {"/taiji2/star_tracker", "/taiji2/grs1/voltages", "/taiji2/grs2/volta
 
 
 def _simulate(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", "simulate", *args], env=python_subprocess_env(),
+    return subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "simulate", *args], env=python_subprocess_env(),
                           capture_output=True, text=True, timeout=300)
 
 

@@ -14,9 +14,9 @@ import numpy as np
 
 from taiji2_estimator_pkg.diagnosis import diagnose, prepare_input
 from taiji2_estimator_pkg.diagnosis.channels import STARTUP_ORDER, STARTUP_SUPPORT_S, startup_function
-from taiji2_sim_pkg.core.config import load_config
-from taiji2_sim_pkg.core.frames import crf_to_tmrf
-from taiji2_sim_pkg.core.grs import voltages_from_accelerations
+from taiji2_model.config import load_config
+from taiji2_model.frames import crf_to_tmrf
+from taiji2_model.grs import voltages_from_accelerations
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 HOUR = 36000

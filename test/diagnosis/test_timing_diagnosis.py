@@ -21,8 +21,8 @@ from taiji2_estimator_pkg.diagnosis.standing import (
     SHRINK_MIN,
     standing_verdict,
 )
-from taiji2_sim_pkg.core.config import load_config
-from taiji2_sim_pkg.core.effect_catalog import make_effect
+from taiji2_model.config import load_config
+from taiji2_model.effect_catalog import make_effect
 from taiji2_sim_pkg.core.reference import simulate_reference
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 

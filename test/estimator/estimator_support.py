@@ -16,7 +16,7 @@ ALL_NOISE = ("thruster_torque", "thruster_force", "srp", "lfs_translational", "l
 
 @functools.lru_cache(maxsize=64)
 def _simulate(layout: str, duration_s: float, seed: int, overrides: tuple) -> object:
-    config_mod = pytest.importorskip("taiji2_sim_pkg.core.config")
+    config_mod = pytest.importorskip("taiji2_model.config")
     sim_mod = pytest.importorskip("taiji2_sim_pkg.core.simulator")
     settings = {"maneuver.duration_s": float(duration_s), **dict(overrides)}
     config = config_mod.load_config(layout, overrides=settings)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from taiji2_estimator_pkg.core.com_offset_model import ComOffsetModel, ComOffsetOptions
+from taiji2_estimator_pkg.core.com_offset.model import ComOffsetModel, ComOffsetOptions
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 
 

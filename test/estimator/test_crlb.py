@@ -21,7 +21,7 @@ def test_bound_scales_as_inverse_sqrt_duration():
 @pytest.mark.parametrize("layout", ["type1", "type2"])
 def test_time_domain_bound_agrees_with_whittle(layout):
     # independent frequency-domain computation of the single-GRS scale-factor information: 3 %
-    from taiji2_sim_pkg.core.config import load_config
+    from taiji2_model.config import load_config
 
     t, omega_dot, omega, config = noise_free_signals(layout, 3500.0)
     instrument = InstrumentModel.from_layout(load_config(layout))  # nominal noise budget
@@ -55,7 +55,7 @@ def _noise_free_offsets(layout: str, duration_s: float):
     from taiji2_estimator_pkg.core.validation import ValidationOptions
 
     t, omega_dot, omega, config = noise_free_signals(layout, duration_s)
-    from taiji2_sim_pkg.core.config import load_config
+    from taiji2_model.config import load_config
 
     instrument = InstrumentModel.from_layout(load_config(layout))
     sensors = {s.grs_id: s for s in config.grs.sensors}
@@ -94,7 +94,7 @@ def test_full_bound_lies_between_g_exact_and_two_stage(layout):
 def test_full_bound_tends_to_g_exact_when_g_is_known():
     # limit where they must agree: G stage information x 1e8 -> the joint bound on d is the G-exact one
     # (to 1e-6 relative: the prior's part of the covariance scales as 1e-8)
-    from taiji2_estimator_pkg.core.joint_com_offset import joint_information
+    from taiji2_estimator_pkg.core.com_offset.joint import joint_information
     from taiji2_estimator_pkg.core.twostage import solve_information
 
     co, bound = _noise_free_offsets("type2", 1750.0)

@@ -14,7 +14,7 @@ from taiji2_estimator_pkg.calibration import AlignedRecord, align_streams, calib
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.first_met import first_met_data_times
 from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
-from taiji2_sim_pkg.core.config import load_config
+from taiji2_model.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 N = 5200  # 520 s at 10 Hz: every G requirement met (270-497 s for seed 3), no d requirement yet

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimator
-from taiji2_estimator_pkg.core.com_offset_model import ComOffsetOptions
+from taiji2_estimator_pkg.core.com_offset.model import ComOffsetOptions
 from taiji2_estimator_pkg.core.gate_span import GateSpan
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 

@@ -2,8 +2,9 @@
 
 import numpy as np
 
-from taiji2_estimator_pkg.core import com_offset_gls, joint_com_offset
 from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimator
+from taiji2_estimator_pkg.core.com_offset import gls as com_offset_gls
+from taiji2_estimator_pkg.core.com_offset import joint as joint_com_offset
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 
 from estimator_support import simulate, truth

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from rosbags.rosbag2 import Reader
 
-from taiji2_estimator_pkg.cli.experiment_link import estimate_stamps_ns
+from taiji2_apps.cli.experiment_link import estimate_stamps_ns
 from taiji2_runtime.interfaces import typestore
 from taiji2_runtime.ros import messages, rclpy
 
@@ -131,7 +131,7 @@ class Graph:
         log = (self.root / f"{name}.log").open("a")
         limit = self.recorder_file_size_limit if name == "recorder" else None
         preexec = None if limit is None else (lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit)))
-        self.procs[name] = subprocess.Popen([PYTHON, "-m", "taiji2_runtime.cli.main", *self.argv(name)],
+        self.procs[name] = subprocess.Popen([PYTHON, "-m", "taiji2_apps.cli.main", *self.argv(name)],
                                             stdout=log, stderr=subprocess.STDOUT, env=python_subprocess_env(),
                                             preexec_fn=preexec)
 

@@ -48,7 +48,7 @@ def reference():
     so this is the fault-free graph's answer without running a sixth graph."""
     from taiji2_estimator_pkg.core.instrument import InstrumentModel
     from taiji2_estimator_pkg.core.pipeline import calibrate
-    from taiji2_sim_pkg.core.config import load_config
+    from taiji2_model.config import load_config
     from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
     config = load_config("type1", overrides={"maneuver.duration_s": DURATION_S})

@@ -12,7 +12,7 @@ HERE = Path(__file__).parent
 
 
 def _sim(duration_s: float, *extra: str) -> subprocess.Popen:
-    cmd = [PYTHON, "-m", "taiji2_runtime.cli.main", "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args",
+    cmd = [PYTHON, "-m", "taiji2_apps.cli.main", "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args",
            "-p", f"duration_s:={duration_s}", "-p", "sync_with_command:=false", "-p", "seed:=3",
            "-p", "wait_for_subscribers:=[1, 0, 0]", "-p", "publish_truth:=false", *extra]
     return subprocess.Popen(cmd, env=python_subprocess_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from spacepackets.ecss.tc import PusTc
 
+from taiji2_model.maneuver import SquareWaveManeuver
 from taiji2_runtime.packets.scheduling import (
     FAILURE_LATE,
     Activity,
@@ -16,7 +17,6 @@ from taiji2_runtime.packets.scheduling import (
     encode_report,
 )
 from taiji2_sim_pkg.core.link import load_link_model
-from taiji2_sim_pkg.core.maneuver import SquareWaveManeuver
 from taiji2_sim_pkg.core.time_schedule import OnboardSchedule, PlanError, maneuver_activities, plan_uplinks
 
 

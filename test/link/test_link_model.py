@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from taiji2_ground_pkg.reception import GroundReception
 from taiji2_runtime.packets.definition import STREAMS
 from taiji2_runtime.packets.packetize import encode_packet
-from taiji2_runtime.packets.reception import GroundReception
 from taiji2_sim_pkg.core.link import Downlink, LinkError, Uplink, load_link_model
 
 DT = 0.1

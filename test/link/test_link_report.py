@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from taiji2_estimator_pkg.cli.experiment_link import (
+from taiji2_apps.cli.experiment_link import (
     commanding_summary,
     earliest_maneuver_start_s,
     pass_of,

@@ -1,6 +1,6 @@
 """The link experiment's monitor takes what queued while it waited, in one go, and stops when nothing is left."""
 
-from taiji2_estimator_pkg.cli.experiment_link import spin_for
+from taiji2_apps.cli.experiment_link import spin_for
 
 
 class _QueuedExecutor:

@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 import yaml
 
-from taiji2_estimator_pkg.cli.experiment_link import estimate_stamps_ns
+from taiji2_apps.cli.experiment_link import estimate_stamps_ns
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.parameters import flatten
 from taiji2_estimator_pkg.core.scale_factor import ScaleFactorEstimator
 from taiji2_estimator_pkg.nodes.com_offset_estimator import ComOffsetEstimatorNode
 from taiji2_estimator_pkg.nodes.scale_factor_estimator import ScaleFactorEstimatorNode
+from taiji2_model.config import load_config
 from taiji2_runtime.ros import messages, rclpy
-from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 from support import REPO, spin_until

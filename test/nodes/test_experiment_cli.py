@@ -13,7 +13,7 @@ def test_experiment_ends_with_a_verdict_on_a_private_domain_and_cleans_up(tmp_pa
     env = python_subprocess_env()
     env.pop("ROS_DOMAIN_ID", None)  # as a user runs it: the command picks a private domain
     env["TMPDIR"] = str(tmp_path)
-    proc = subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", "experiment", "--layout", "type1",
+    proc = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "experiment", "--layout", "type1",
                            "--maneuver", "paper", "--duration-s", "200"], env=env, capture_output=True, text=True,
                           timeout=300)
     # 200 s of the paper's preset cannot meet the d requirements: exit 3, and the verdict says why and what to do

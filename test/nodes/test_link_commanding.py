@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from taiji2_ground_pkg.nodes.command_planner import CommandPlanner
+from taiji2_model.config import load_config
+from taiji2_model.maneuver import SquareWaveManeuver
+from taiji2_runtime import link_topics as lt
 from taiji2_runtime.packets.scheduling import FAILURE_LATE, decode_report
 from taiji2_runtime.ros import messages, rclpy
-from taiji2_sim_pkg.core.config import load_config
-from taiji2_sim_pkg.core.maneuver import SquareWaveManeuver
-from taiji2_sim_pkg.nodes import link_topics as lt
-from taiji2_sim_pkg.nodes.command_planner import CommandPlanner
 from taiji2_sim_pkg.nodes.onboard_executor import OnboardExecutor
 from taiji2_sim_pkg.nodes.space_link import SpaceLink
 

@@ -9,12 +9,12 @@ import time
 
 import numpy as np
 
+from taiji2_ground_pkg.nodes import ground_receiver
+from taiji2_ground_pkg.nodes.ground_receiver import GroundReceiver
 from taiji2_runtime.packets.definition import STREAMS
 from taiji2_runtime.packets.packetize import encode_packet
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.link import Downlink, load_link_model
-from taiji2_sim_pkg.nodes import ground_receiver
-from taiji2_sim_pkg.nodes.ground_receiver import GroundReceiver
 from taiji2_sim_pkg.nodes.space_link import SpaceLink
 from taiji2_sim_pkg.nodes.telemetry_packetizer import TelemetryPacketizer
 

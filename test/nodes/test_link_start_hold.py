@@ -9,11 +9,11 @@ import json
 import numpy as np
 import pytest
 
+from taiji2_ground_pkg.nodes.ground_receiver import GroundReceiver
 from taiji2_runtime.domain import reserve_private_domain
 from taiji2_runtime.ros import messages, rclpy
-from taiji2_sim_pkg.nodes.ground_receiver import GroundReceiver
+from taiji2_runtime.subscribed_publisher import SubscribedPublisher
 from taiji2_sim_pkg.nodes.space_link import SpaceLink
-from taiji2_sim_pkg.nodes.subscribed_publisher import SubscribedPublisher
 from taiji2_sim_pkg.nodes.telemetry_packetizer import TelemetryPacketizer
 
 from support import ground_reader, spin_until

@@ -13,7 +13,7 @@ from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimator
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.parameters import DEFAULTS, com_offset_options, scale_factor_options
 from taiji2_estimator_pkg.core.pipeline import calibrate
-from taiji2_sim_pkg.core.config import load_config
+from taiji2_model.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 N = 6000  # 600 s at 10 Hz: d determined

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from test_estimator_nodes import _Feeder
 
-from taiji2_estimator_pkg.cli.experiment_link import estimate_stamps_ns
+from taiji2_apps.cli.experiment_link import estimate_stamps_ns
 from taiji2_estimator_pkg.nodes.com_offset_estimator import ComOffsetEstimatorNode
 from taiji2_estimator_pkg.nodes.scale_factor_estimator import ScaleFactorEstimatorNode
+from taiji2_model.config import load_config
 from taiji2_runtime.ros import messages
-from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 from support import cpu_bound_processes, spin_until

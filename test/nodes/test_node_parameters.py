@@ -10,8 +10,8 @@ import yaml
 from taiji2_estimator_pkg.nodes.com_offset_estimator import ComOffsetEstimatorNode
 from taiji2_estimator_pkg.nodes.runtime_parameters import RUNTIME_CHECKS
 from taiji2_estimator_pkg.nodes.scale_factor_estimator import ScaleFactorEstimatorNode
+from taiji2_model.config import load_config
 from taiji2_runtime.ros import messages, rclpy
-from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 from taiji2_sim_pkg.nodes.maneuver_commander import ManeuverCommander
 from taiji2_sim_pkg.nodes.spacecraft_sim import SpacecraftSim
@@ -141,8 +141,8 @@ def test_config_files_say_which_parameters_can_change_at_run_time():
 def test_link_nodes_parameters_are_read_only():
     # the link's and the commanding chain's parameters are read once at start: `ros2 param set` is refused,
     # not answered "successful" for a change that would do nothing
-    from taiji2_sim_pkg.nodes.command_planner import CommandPlanner
-    from taiji2_sim_pkg.nodes.ground_receiver import GroundReceiver
+    from taiji2_ground_pkg.nodes.command_planner import CommandPlanner
+    from taiji2_ground_pkg.nodes.ground_receiver import GroundReceiver
     from taiji2_sim_pkg.nodes.onboard_executor import OnboardExecutor
     from taiji2_sim_pkg.nodes.space_link import SpaceLink
     from taiji2_sim_pkg.nodes.telemetry_packetizer import TelemetryPacketizer

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from taiji2_estimator_pkg.cli.experiment_link import estimate_stamps_ns
+from taiji2_apps.cli.experiment_link import estimate_stamps_ns
 from taiji2_runtime.ros import messages, rclpy
 
 from support import PYTHON, python_subprocess_env
@@ -19,7 +19,7 @@ DURATION_S = 600.0  # the c.m.-offset estimate is determined after a few minutes
 
 
 def _taiji2(*args, **kwargs):
-    return subprocess.Popen([PYTHON, "-m", "taiji2_runtime.cli.main", *map(str, args)], env=python_subprocess_env(),
+    return subprocess.Popen([PYTHON, "-m", "taiji2_apps.cli.main", *map(str, args)], env=python_subprocess_env(),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
 
 

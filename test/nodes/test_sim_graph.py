@@ -7,8 +7,8 @@ import time
 import numpy as np
 import pytest
 
+from taiji2_model.config import load_config
 from taiji2_runtime.ros import messages, rclpy
-from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 from taiji2_sim_pkg.nodes.maneuver_commander import ManeuverCommander
 from taiji2_sim_pkg.nodes.spacecraft_sim import SpacecraftSim

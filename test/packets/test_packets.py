@@ -10,7 +10,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from taiji2_estimator_pkg.io import RawBagError, load_raw_bag
+from taiji2_estimator_pkg.io import RawBagError
+from taiji2_ground_pkg.raw_data import load_raw_data
 from taiji2_runtime.packets.bag_io import read_bag_streams, write_bag
 from taiji2_runtime.packets.bulk_decode import decode_packet_buffers
 from taiji2_runtime.packets.bulk_encode import encode_stream, encode_streams
@@ -40,7 +41,7 @@ def _streams(n=300, seed=5):
 def _taiji2(*argv):
     env = python_subprocess_env()
     env.setdefault("ROS_DOMAIN_ID", os.environ.get("ROS_DOMAIN_ID", "0"))
-    return subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", *map(str, argv)], capture_output=True,
+    return subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", *map(str, argv)], capture_output=True,
                           text=True, timeout=120, env=env)
 
 
@@ -117,7 +118,7 @@ def test_bag_packets_bag_round_trip(tmp_path, telecommands):
     write_bag(tmp_path / "bag2", decoded)
     again, _ = read_bag_streams(tmp_path / "bag2")
     assert encode_streams(again, EPOCH, telecommands=telecommands) == octets  # stamps stay on their CUC counts
-    a, b = load_raw_bag(tmp_path / "bag"), load_raw_bag(tmp_path / "bag2")
+    a, b = load_raw_data(tmp_path / "bag"), load_raw_data(tmp_path / "bag2")
     assert np.array_equal(a.star_tracker.quat_xyzw, b.star_tracker.quat_xyzw)
     assert np.array_equal(a.star_tracker.cov_rad2, b.star_tracker.cov_rad2)
     assert np.array_equal(a.grs2.voltages_v, b.grs2.voltages_v) and np.array_equal(a.commands.torque_n_m,
@@ -206,7 +207,7 @@ def test_packet_directory_time_correlation_and_detection(tmp_path):
     (tmp_path / "dir" / "time_correlation.yaml").write_text("time_correlation:\n  offset_s: 1699999000.0\n"
                                                             "  rate: 1.000001\n")
     assert is_packet_path(tmp_path / "dir") and not is_packet_path(tmp_path / "dir" / "time_correlation.yaml")
-    exp = load_raw_bag(tmp_path / "dir")
+    exp = load_raw_data(tmp_path / "dir")
     assert exp.storage == "ccsds" and exp.packets is not None
     assert np.abs(exp.grs1.stamp_ns - streams["grs1"][0]).max() <= 31
     assert np.array_equal(exp.star_tracker.quat_xyzw, streams["star_tracker"][1][:, :4])
@@ -219,7 +220,7 @@ def test_packet_directory_time_correlation_and_detection(tmp_path):
 def test_calibrate_packets_equals_bag_and_damaged_within_sigma(tmp_path):
     from taiji2_estimator_pkg.calibration import align_streams, calibrate
     from taiji2_estimator_pkg.core.instrument import InstrumentModel
-    from taiji2_sim_pkg.core.config import load_config
+    from taiji2_model.config import load_config
     from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
     config = load_config("type1", overrides={"maneuver.duration_s": 1800.0})
@@ -236,7 +237,7 @@ def test_calibrate_packets_equals_bag_and_damaged_within_sigma(tmp_path):
     instrument = InstrumentModel.from_layout("type1")
 
     def estimate(path):
-        raw = load_raw_bag(path)
+        raw = load_raw_data(path)
         grs = {g: (raw.grs(g).stamp_ns, raw.grs(g).voltages_v) for g in (1, 2)}
         table = calibrate(align_streams(raw.star_tracker.stamp_ns, raw.star_tracker.quat_xyzw, grs,
                                         instrument.sample_rate_hz), instrument)
@@ -260,7 +261,7 @@ def test_cli_export_import_info_and_bad_input(tmp_path):
     res = _taiji2("bag", "import", tmp_path / "exp.tm", "-o", tmp_path / "back", "--time-correlation",
                   tmp_path / "corr.yaml")
     assert res.returncode == 0, res.stderr
-    back, bag = load_raw_bag(tmp_path / "back"), load_raw_bag(tmp_path / "bag")
+    back, bag = load_raw_data(tmp_path / "back"), load_raw_data(tmp_path / "bag")
     assert np.array_equal(back.grs1.voltages_v, bag.grs1.voltages_v)
     octets = (tmp_path / "exp.tm").read_bytes()
     damaged = bytearray(octets[:-10])
@@ -288,7 +289,7 @@ def test_cli_export_import_info_and_bad_input(tmp_path):
     with pytest.raises(RawBagError, match="no packets of raw topic"):
         only = encode_streams({"grs1": _streams()["grs1"]}, EPOCH)
         (tmp_path / "only.tm").write_bytes(only)
-        load_raw_bag(tmp_path / "only.tm")
+        load_raw_data(tmp_path / "only.tm")
 
 
 def test_streams_definition_is_consistent():

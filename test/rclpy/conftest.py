@@ -69,7 +69,7 @@ def ros(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., subprocess.Co
                            capture_output=True, text=True, timeout=900)
     assert build.returncode == 0, build.stdout[-3000:]
     prefix += f" && source {ws}/install/setup.bash"
-    printed = subprocess.run(["bash", "-c", f"{prefix} && env -u CYCLONEDDS_URI ros2 run taiji2_runtime taiji2 "
+    printed = subprocess.run(["bash", "-c", f"{prefix} && env -u CYCLONEDDS_URI ros2 run taiji2_apps taiji2 "
                               "--print-cyclonedds-config"], capture_output=True, text=True, timeout=60)
     assert printed.returncode == 0 and printed.stdout.startswith("<CycloneDDS>"), printed.stderr
     cyclonedds_uri = printed.stdout.strip()

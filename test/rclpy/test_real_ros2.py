@@ -9,8 +9,9 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 ALL_EXECUTABLES = {"taiji2_sim_pkg spacecraft_sim", "taiji2_sim_pkg maneuver_commander",
-                   "taiji2_sim_pkg telemetry_packetizer", "taiji2_sim_pkg space_link", "taiji2_sim_pkg ground_receiver",
-                   "taiji2_sim_pkg onboard_executor", "taiji2_sim_pkg command_planner",
+                   "taiji2_sim_pkg telemetry_packetizer", "taiji2_sim_pkg space_link",
+                   "taiji2_sim_pkg onboard_executor",
+                   "taiji2_ground_pkg ground_receiver", "taiji2_ground_pkg command_planner",
                    "taiji2_estimator_pkg scale_factor_estimator", "taiji2_estimator_pkg com_offset_estimator"}
 
 
@@ -21,7 +22,8 @@ def _stop(proc) -> tuple[int, str]:
 
 
 def test_colcon_build_installs_every_node(ros):
-    out = ros("ros2 pkg executables taiji2_sim_pkg && ros2 pkg executables taiji2_estimator_pkg")
+    out = ros(" && ".join(f"ros2 pkg executables {package}" for package in
+                   ("taiji2_sim_pkg", "taiji2_estimator_pkg", "taiji2_ground_pkg")))
     assert out.returncode == 0, out.stderr
     assert set(out.stdout.strip().splitlines()) == ALL_EXECUTABLES
 
@@ -67,7 +69,7 @@ def test_bad_input_is_one_error_line_and_exit_2(ros):
 
 def test_embedded_runtime_node_reaches_ros2_cli_and_back(ros):
     # embedded-runtime commander (Cyclone DDS directly) -> the real ROS 2 CLI
-    embedded = ros("exec python3 -m taiji2_runtime.cli.main run taiji2_sim_pkg maneuver_commander",
+    embedded = ros("exec python3 -m taiji2_apps.cli.main run taiji2_sim_pkg maneuver_commander",
                    env={"TAIJI2_RUNTIME": "cyclonedds"}, background=True)
     try:
         # the type is given: the embedded node may still be starting when the echo looks for the topic
@@ -79,7 +81,7 @@ def test_embedded_runtime_node_reaches_ros2_cli_and_back(ros):
     # rclpy commander -> the embedded runtime's `taiji2 topic echo`
     real = ros("exec ros2 run taiji2_sim_pkg maneuver_commander", background=True)
     try:
-        echo = ros("python3 -m taiji2_runtime.cli.main topic echo /taiji2/maneuver/command --once", timeout=120,
+        echo = ros("python3 -m taiji2_apps.cli.main topic echo /taiji2/maneuver/command --once", timeout=120,
                    env={"TAIJI2_RUNTIME": "cyclonedds"})
     finally:
         status, err = _stop(real)
@@ -98,7 +100,7 @@ def test_embedded_endpoints_carry_rosidls_type_hash(ros):
         generated = json.loads(out.stdout)["type_hashes"][0]
         assert generated["hash_string"] == type_hash_of(f"taiji2_msgs/msg/{name}"), name
     # an embedded endpoint as the ROS 2 CLI sees it: the hash parsed from USER_DATA, no rmw warning
-    embedded = ros("exec python3 -m taiji2_runtime.cli.main run taiji2_sim_pkg maneuver_commander",
+    embedded = ros("exec python3 -m taiji2_apps.cli.main run taiji2_sim_pkg maneuver_commander",
                    env={"TAIJI2_RUNTIME": "cyclonedds"}, background=True)
     try:
         info = ros("ros2 topic echo --once /taiji2/maneuver/command geometry_msgs/msg/WrenchStamped >/dev/null && "
@@ -116,7 +118,7 @@ def _rmw_warnings(text: str) -> list[str]:
 
 
 def test_ros2_cli_sees_embedded_node_its_parameters_and_topics(ros):
-    embedded = ros("exec python3 -m taiji2_runtime.cli.main run taiji2_sim_pkg maneuver_commander "
+    embedded = ros("exec python3 -m taiji2_apps.cli.main run taiji2_sim_pkg maneuver_commander "
                    "--ros-args -p period_s:=250.0", env={"TAIJI2_RUNTIME": "cyclonedds"}, background=True)
     try:
         # discovery is asynchronous: ask until the node is listed (bounded: 30 tries of a 1-s listing)
@@ -149,7 +151,7 @@ def test_ros2_cli_sees_embedded_node_its_parameters_and_topics(ros):
 
 def test_embedded_tools_see_rclpy_node_and_its_parameters(ros):
     real = ros("exec ros2 run taiji2_sim_pkg maneuver_commander --ros-args -p period_s:=250.0", background=True)
-    taiji2 = "python3 -m taiji2_runtime.cli.main"
+    taiji2 = "python3 -m taiji2_apps.cli.main"
     try:
         # with ros2cli's daemon (a hidden node, /_ros2cli_daemon_...) in the graph, as on a ROS 2 machine
         listed = ros(f"ros2 daemon start >/dev/null; "

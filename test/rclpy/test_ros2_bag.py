@@ -21,7 +21,7 @@ RAW_TOPICS = ("/taiji2/star_tracker", "/taiji2/grs1/voltages", "/taiji2/grs2/vol
 SAMPLES = 6000  # 600 s at 10 Hz
 #: the QoS override file the README gives rosbag2 (issue 26 row 5): lossless record and play
 QOS_OVERRIDES = "$(ros2 pkg prefix taiji2_runtime)/share/taiji2_runtime/config/rosbag2_qos_overrides.yaml"
-#: true values of the Type-1 preset (src/taiji2_sim_pkg/config/type1.yaml)
+#: true values of the Type-1 preset (src/taiji2_model/config/type1.yaml)
 TRUE_G = {"grs1": [5.524e-8, 5.524e-8, 7.365e-8], "grs2": [5.524e-8, 5.524e-8, 7.365e-8]}
 TRUE_D = {"grs1": [1.0e-4, 0.18, 2.0e-4], "grs2": [1.0e-4, -0.18, 2.0e-4]}
 #: a fixed seed makes the data deterministic; 4 sigma per component leaves room for any seed
@@ -35,7 +35,7 @@ def _stop(proc) -> tuple[int, str]:
 
 
 def _calibrate(ros, bag) -> dict:
-    out = ros(f"python3 -m taiji2_runtime.cli.main calibrate {bag} --layout type1 --json", timeout=300)
+    out = ros(f"python3 -m taiji2_apps.cli.main calibrate {bag} --layout type1 --json", timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     return json.loads(out.stdout)
 
@@ -50,7 +50,7 @@ def test_ros2_bag_record_is_calibrated_and_the_recorders_bag_is_played_by_ros2_b
         "ros2 bag record": ros(f"exec ros2 bag record -s {storage} {options} --qos-profile-overrides-path "
                                f"{QOS_OVERRIDES} -o {theirs} {topics}", background=True),
         # -a: also rosbag2's /events/write_split (Jazzy's WriteSplitEvent, which Humble defines otherwise)
-        "taiji2 bag record": ros(f"exec python3 -m taiji2_runtime.cli.main bag record -a -o {ours}",
+        "taiji2 bag record": ros(f"exec python3 -m taiji2_apps.cli.main bag record -a -o {ours}",
                                  env={"TAIJI2_RUNTIME": "cyclonedds"}, background=True),
     }
     commander = ros("exec ros2 run taiji2_sim_pkg maneuver_commander --ros-args -p use_sim_time:=true "
@@ -115,7 +115,7 @@ def test_ros2_bag_record_is_calibrated_and_the_recorders_bag_is_played_by_ros2_b
     if storage == "mcap" and not options:
         # ros2 bag play with the QoS overrides at 200x into a keep-all reader (this project's recorder): lossless
         again = tmp_path / "replayed"
-        recorder = ros(f"exec python3 -m taiji2_runtime.cli.main bag record -o {again} {topics}",
+        recorder = ros(f"exec python3 -m taiji2_apps.cli.main bag record -o {again} {topics}",
                        env={"TAIJI2_RUNTIME": "cyclonedds"}, background=True)
         try:
             # the recorder subscribes once it sees a publisher (to learn its QoS): the player waits 5 s (--delay)

@@ -1,5 +1,5 @@
 """The README's ROS 2 route leaves the tools working (issue 26 row 6): after rosdep (package.xml's keys) and the
-README's one pip command (requirements-ros.txt), ``ros2 run taiji2_runtime taiji2 calibrate BAG`` runs.
+README's one pip command (requirements-ros.txt), ``ros2 run taiji2_apps taiji2 calibrate BAG`` runs.
 
 This ROS 2 image is minimal and has no rosdep database: the distribution packages rosdep would install for
 package.xml's keys (python3-scipy, python3-matplotlib) are stood in for by the same pins with pip, into the same
@@ -32,7 +32,7 @@ def _readme_pip_line() -> str:
 
 def test_readme_pip_command_completes_the_tools_under_ros2_run(ros, tmp_path):
     bag = tmp_path / "bag"
-    made = subprocess.run([sys.executable, "-m", "taiji2_runtime.cli.main", "simulate", "--duration-s", "600",
+    made = subprocess.run([sys.executable, "-m", "taiji2_apps.cli.main", "simulate", "--duration-s", "600",
                            "--seed", "6", "--out", str(bag)], capture_output=True, text=True, timeout=300)
     assert made.returncode == 0, made.stderr[-2000:]
     userbase = tmp_path / "userbase"
@@ -41,7 +41,7 @@ def test_readme_pip_command_completes_the_tools_under_ros2_run(ros, tmp_path):
     out = ros(f"export PYTHONPATH=$(echo $PYTHONPATH | tr ':' '\\n' | grep -e /opt/ros -e /install/ | paste -sd:) && "
               f"{pip} {' '.join(ROSDEP_STAND_INS)} && {_readme_pip_line()} && "
               f"python3 -c 'import rosbags.rosbag2, threadpoolctl, spacepackets; print(rosbags.rosbag2.__file__)' && "
-              f"ros2 run taiji2_runtime taiji2 calibrate {bag} --json",
+              f"ros2 run taiji2_apps taiji2 calibrate {bag} --json",
               env={"PYTHONUSERBASE": str(userbase), "PYTHONNOUSERSITE": ""}, timeout=600)
     if out.returncode != 0 and "No matching distribution" in out.stderr + out.stdout:
         pytest.skip(f"no package index reachable: {out.stderr[-300:]}")

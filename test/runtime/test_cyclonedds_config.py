@@ -10,7 +10,7 @@ from taiji2_runtime.cyclonedds_config import DEFAULT_CYCLONEDDS_CONFIG
 
 from support import PYTHON, python_subprocess_env
 
-PROBE = ("import sys; from taiji2_runtime.cli.main import main; status = main(['--print-cyclonedds-config']); "
+PROBE = ("import sys; from taiji2_apps.cli.main import main; status = main(['--print-cyclonedds-config']); "
          "assert 'cyclonedds' not in sys.modules, 'imported cyclonedds'; sys.exit(status)")
 
 

@@ -16,7 +16,7 @@ def _taiji2(*args: str) -> subprocess.CompletedProcess:
 
 
 def test_node_list_and_param_get_set_reach_an_embedded_node():
-    node = subprocess.Popen([PYTHON, "-m", "taiji2_runtime.cli.main", "run", "taiji2_sim_pkg", "maneuver_commander",
+    node = subprocess.Popen([PYTHON, "-m", "taiji2_apps.cli.main", "run", "taiji2_sim_pkg", "maneuver_commander",
                              "--ros-args", "-r", f"__node:={NODE[1:]}", "-p", "publish_rate_hz:=20.0"],
                             env=python_subprocess_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:

@@ -57,7 +57,7 @@ class WrenchStamped_(IdlStruct, typename="geometry_msgs::msg::dds_::WrenchStampe
 
 
 def _start_commander(*ros_args: str) -> subprocess.Popen:
-    cmd = [PYTHON, "-m", "taiji2_runtime.cli.main", "run", "taiji2_sim_pkg", "maneuver_commander",
+    cmd = [PYTHON, "-m", "taiji2_apps.cli.main", "run", "taiji2_sim_pkg", "maneuver_commander",
            "--ros-args", "-p", "publish_rate_hz:=20.0", *ros_args]
     return subprocess.Popen(cmd, env=python_subprocess_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
@@ -127,7 +127,7 @@ BAD_INPUT = [
 
 @pytest.mark.parametrize(("argv", "message"), BAD_INPUT)
 def test_bad_input_gives_one_line_error_and_nonzero_exit(argv, message):
-    proc = subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", *argv], env=python_subprocess_env(),
+    proc = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", *argv], env=python_subprocess_env(),
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     lines = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
@@ -139,7 +139,7 @@ def test_no_usable_network_interface_is_a_one_line_error():
     env = python_subprocess_env()
     env["CYCLONEDDS_URI"] = ("<CycloneDDS><Domain><General><Interfaces><NetworkInterface name=\"nonexist0\"/>"
                              "</Interfaces></General></Domain></CycloneDDS>")
-    proc = subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", "run", "taiji2_sim_pkg", "maneuver_commander"],
+    proc = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "run", "taiji2_sim_pkg", "maneuver_commander"],
                           env=env, capture_output=True, text=True, timeout=60)
     errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
     assert proc.returncode == 2 and len(errors) == 1 and "nonexist0" in proc.stderr, proc.stderr
@@ -194,7 +194,7 @@ def test_a_second_node_with_the_same_name_in_another_process_exits_with_one_line
     first = _start_commander()
     try:
         time.sleep(1.0)  # the first one is up and announced
-        second = subprocess.run([PYTHON, "-m", "taiji2_runtime.cli.main", "run", "taiji2_sim_pkg",
+        second = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "run", "taiji2_sim_pkg",
                                  "maneuver_commander"], env=python_subprocess_env(), capture_output=True, text=True,
                                 timeout=60)
         assert second.returncode == 2

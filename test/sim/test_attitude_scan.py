@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from taiji2_model.config import load_config
+from taiji2_model.frames import quat_multiply
 from taiji2_sim_pkg.core.attitude_scan import EPOCH_STEPS, AttitudeScan
-from taiji2_sim_pkg.core.config import load_config
-from taiji2_sim_pkg.core.frames import quat_multiply
 from taiji2_sim_pkg.core.simulator import Simulator, maneuver_torque_commands
 
 

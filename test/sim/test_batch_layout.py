@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 import taiji2_sim_pkg.core.simulator as simulator
+from taiji2_model.config import load_config
+from taiji2_model.effects import Effect
+from taiji2_model.frames import apply_matrix, cross, quat_from_rotvec, quat_multiply
+from taiji2_model.noise import NoiseStreams
 from taiji2_sim_pkg.core.attitude_scan import AttitudeScan
-from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.dynamics import propagate_attitude
-from taiji2_sim_pkg.core.effects import Effect
-from taiji2_sim_pkg.core.frames import apply_matrix, cross, quat_from_rotvec, quat_multiply
-from taiji2_sim_pkg.core.noise import NoiseStreams
 from taiji2_sim_pkg.core.simulator import Simulator, maneuver_torque_commands
 
 SEED = 4242

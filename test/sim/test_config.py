@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from taiji2_sim_pkg.core.config import (
+from taiji2_model.config import (
     NOISE_SOURCE_NAMES,
     ConfigError,
     SimConfig,

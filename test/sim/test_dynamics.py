@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from taiji2_sim_pkg.core.config import NOISE_SOURCE_NAMES, load_config
+from taiji2_model.config import NOISE_SOURCE_NAMES, load_config
+from taiji2_model.frames import quat_multiply, quat_rotate, rotvec_from_quat
 from taiji2_sim_pkg.core.dynamics import gyroscopic_torque_n_m, propagate_attitude
-from taiji2_sim_pkg.core.frames import quat_multiply, quat_rotate, rotvec_from_quat
 from taiji2_sim_pkg.core.simulator import simulate_batch
 
 

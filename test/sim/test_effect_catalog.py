@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from taiji2_sim_pkg.core.config import load_config
-from taiji2_sim_pkg.core.effect_catalog import (
+from taiji2_model.config import load_config
+from taiji2_model.effect_catalog import (
     EFFECTS,
     ActuationDelay,
     ComDrift,
@@ -29,7 +29,7 @@ from taiji2_sim_pkg.core.effect_catalog import (
     make_effect,
     suspension_filter,
 )
-from taiji2_sim_pkg.core.frames import quat_conjugate, quat_multiply, rotvec_from_quat
+from taiji2_model.frames import quat_conjugate, quat_multiply, rotvec_from_quat
 from taiji2_sim_pkg.core.simulator import Simulator, maneuver_torque_commands, simulate_batch
 
 NOISE = ("thruster_torque", "thruster_force", "srp", "lfs_translational", "lfs_rotational", "tm_environment",

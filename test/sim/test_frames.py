@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from taiji2_sim_pkg.core.frames import (
+from taiji2_model.frames import (
     apply_matrix,
     crf_to_tmrf,
     cross,

@@ -3,15 +3,15 @@
 import numpy as np
 import pytest
 
-from taiji2_sim_pkg.core.config import NOISE_SOURCE_NAMES, load_config
-from taiji2_sim_pkg.core.frames import crf_to_tmrf
-from taiji2_sim_pkg.core.grs import (
+from taiji2_model.config import NOISE_SOURCE_NAMES, load_config
+from taiji2_model.frames import crf_to_tmrf
+from taiji2_model.grs import (
     a_tilde_matrix,
     accelerations_from_voltages,
     coupling_acceleration_m_s2,
     voltages_from_accelerations,
 )
-from taiji2_sim_pkg.core.noise import white_noise_std
+from taiji2_model.noise import white_noise_std
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 N_STEPS = 6000  # 10 min: several maneuver edges on every axis

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from taiji2_sim_pkg.core.config import ConfigError, load_config
-from taiji2_sim_pkg.core.maneuver import ManeuverError, SquareWaveManeuver, thrust_per_thruster_n
+from taiji2_model.config import ConfigError, load_config
+from taiji2_model.maneuver import ManeuverError, SquareWaveManeuver, thrust_per_thruster_n
 
 AMPLITUDE = np.array([3e-6, 3e-6, 13e-6])
 PHASE = np.array([0.0, 62.5, 31.25])

@@ -18,9 +18,9 @@ from scipy.integrate import quad
 from scipy.signal import welch
 from scipy.stats import chi2
 
-from taiji2_sim_pkg.core.config import NOISE_SOURCE_NAMES, load_config
-from taiji2_sim_pkg.core.grs import voltages_from_accelerations
-from taiji2_sim_pkg.core.noise import NoiseStreams
+from taiji2_model.config import NOISE_SOURCE_NAMES, load_config
+from taiji2_model.grs import voltages_from_accelerations
+from taiji2_model.noise import NoiseStreams
 from taiji2_sim_pkg.core.simulator import simulate_batch
 from taiji2_sim_pkg.core.star_tracker import attitude_error_rad
 

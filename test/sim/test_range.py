@@ -5,7 +5,7 @@ thruster force noise at 10 Hz pushes the total beyond it. Both numbers are recor
 import numpy as np
 import pytest
 
-from taiji2_sim_pkg.core.config import NOISE_SOURCE_NAMES, load_config
+from taiji2_model.config import NOISE_SOURCE_NAMES, load_config
 from taiji2_sim_pkg.core.range_check import RangeMonitor, peak_linear_report
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 

@@ -8,8 +8,8 @@ agree on noise-free data, each convention of docs/interfaces.md is implemented t
 import numpy as np
 import pytest
 
-from taiji2_sim_pkg.core.config import load_config
-from taiji2_sim_pkg.core.frames import quat_conjugate, quat_multiply, rotvec_from_quat
+from taiji2_model.config import load_config
+from taiji2_model.frames import quat_conjugate, quat_multiply, rotvec_from_quat
 from taiji2_sim_pkg.core.reference import simulate_reference
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 

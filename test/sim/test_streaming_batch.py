@@ -5,9 +5,9 @@ from dataclasses import fields
 import numpy as np
 import pytest
 
-from taiji2_sim_pkg.core.config import NOISE_SOURCE_NAMES, load_config
-from taiji2_sim_pkg.core.effects import Effect
-from taiji2_sim_pkg.core.noise import NoiseStreams
+from taiji2_model.config import NOISE_SOURCE_NAMES, load_config
+from taiji2_model.effects import Effect
+from taiji2_model.noise import NoiseStreams
 from taiji2_sim_pkg.core.simulator import SimOutput, Simulator, maneuver_torque_commands, simulate_batch
 
 N_STEPS = 3000  # 5 min at 10 Hz, several edges per axis

@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from taiji2_sim_pkg.core.config import ConfigError, load_config
-from taiji2_sim_pkg.core.effect_catalog import make_effect
+from taiji2_model.config import ConfigError, load_config
+from taiji2_model.effect_catalog import make_effect
+from taiji2_model.timing import actuated_commands, actuation_weights
 from taiji2_sim_pkg.core.simulator import Simulator, maneuver_torque_commands, simulate_batch
-from taiji2_sim_pkg.core.timing import actuated_commands, actuation_weights
 
 DT = 0.1
 QUIET = {f"noise.{name}.enabled": False for name in ("thruster_torque", "thruster_force", "srp", "lfs_translational",

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from .report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL, EstimateTable
+from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL, EstimateTable
 
 __all__ = ["ParameterCheck", "Verdict", "judge", "range_warning"]
 

@@ -15,25 +15,25 @@ Modules:
 - :mod:`.pipeline`: offline calibration of a whole record
 """
 
-from .com_offset import (
+from taiji2_estimator_pkg.core.com_offset import (
     ComOffsetEstimate,
     ComOffsetEstimator,
     ComOffsetOptions,
     PaperComOffsetFilter,
     PaperComOffsetOptions,
 )
-from .crlb import CrlbResult, crlb, crlb_for_layout
-from .instrument import InstrumentModel
-from .noise_model import NoiseBudget
-from .pipeline import CalibrationResult, calibrate
-from .scale_factor import (
+from taiji2_estimator_pkg.core.crlb import CrlbResult, crlb, crlb_for_layout
+from taiji2_estimator_pkg.core.instrument import InstrumentModel
+from taiji2_estimator_pkg.core.noise_model import NoiseBudget
+from taiji2_estimator_pkg.core.pipeline import CalibrationResult, calibrate
+from taiji2_estimator_pkg.core.scale_factor import (
     PaperScaleFactorFilter,
     PaperScaleFactorOptions,
     ScaleFactorEstimate,
     ScaleFactorEstimator,
     ScaleFactorOptions,
 )
-from .validation import InputValidator, ValidationOptions
+from taiji2_estimator_pkg.core.validation import InputValidator, ValidationOptions
 
 __all__ = [
     "CalibrationResult",

@@ -42,12 +42,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .com_offset import ComOffsetEstimator, ComOffsetOptions, cross_matrix
-from .instrument import InstrumentModel, linear_scale_factors
-from .joint_com_offset import joint_information
-from .scale_factor import ScaleFactorEstimator, ScaleFactorOptions
-from .twostage import solve_information
-from .validation import ValidationOptions
+from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimator, ComOffsetOptions, cross_matrix
+from taiji2_estimator_pkg.core.com_offset.joint import joint_information
+from taiji2_estimator_pkg.core.instrument import InstrumentModel, linear_scale_factors
+from taiji2_estimator_pkg.core.scale_factor import ScaleFactorEstimator, ScaleFactorOptions
+from taiji2_estimator_pkg.core.twostage import solve_information
+from taiji2_estimator_pkg.core.validation import ValidationOptions
 
 __all__ = [
     "CrlbResult",
@@ -282,7 +282,7 @@ def noise_free_signals(layout: Any, duration_s: float | None = None,
     config : SimConfig
         The configuration used (noise switched off).
     """
-    from taiji2_sim_pkg.core.config import NOISE_SOURCE_NAMES, load_config  # optional dependency
+    from taiji2_model.config import NOISE_SOURCE_NAMES, load_config  # optional dependency
     from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
     source = layout.to_dict() if hasattr(layout, "to_dict") else layout
@@ -314,7 +314,7 @@ def crlb_for_layout(layout: Any, duration_s: float | None = None, grs_ids: Seque
     detrend : str
         Nuisance model of d.
     """
-    from taiji2_sim_pkg.core.config import load_config  # optional dependency
+    from taiji2_model.config import load_config  # optional dependency
 
     source = layout.to_dict() if hasattr(layout, "to_dict") else layout
     config = load_config(source, overrides=dict(overrides or {}))

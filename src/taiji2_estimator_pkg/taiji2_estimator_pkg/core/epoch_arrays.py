@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from .attitude import integrate_attitude
-from .instrument import angular_differences, linear_sums
+from taiji2_estimator_pkg.core.attitude import integrate_attitude
+from taiji2_estimator_pkg.core.instrument import angular_differences, linear_sums
 
 
 @dataclass

@@ -1,8 +1,8 @@
 """Instrument model the estimators need: geometry, nominal parameters, noise budget, conversions.
 
 Nothing here needs the simulator: the model is read from a plain mapping in the layout-file format
-(``taiji2_sim_pkg/config/type1.yaml``), from a YAML file of that format, or from any object with a
-``to_dict()`` returning that mapping (e.g. ``taiji2_sim_pkg.core.config.SimConfig``).
+(``taiji2_model/config/type1.yaml``), from a YAML file of that format, or from any object with a
+``to_dict()`` returning that mapping (e.g. ``taiji2_model.config.SimConfig``).
 
 Conventions (physics.md, interfaces.md):
 
@@ -26,7 +26,7 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike
 
-from .noise_model import NoiseBudget, _get
+from taiji2_estimator_pkg.core.noise_model import NoiseBudget, _get
 
 __all__ = [
     "InstrumentModel",
@@ -99,7 +99,7 @@ def load_layout_mapping(source: str | os.PathLike[str] | Mapping[str, Any] | Any
     path = Path(source)
     if not path.exists():
         try:  # optional convenience: built-in layouts of the simulator package
-            from taiji2_sim_pkg.core.config import builtin_layouts
+            from taiji2_model.config import builtin_layouts
         except ImportError as error:  # pragma: no cover - depends on the installation
             raise ValueError(f"layout {str(source)!r}: no such file") from error
         layouts = builtin_layouts()

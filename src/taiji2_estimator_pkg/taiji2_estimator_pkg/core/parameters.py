@@ -14,9 +14,9 @@ from typing import Any
 
 import yaml
 
-from .com_offset import ComOffsetOptions, PaperComOffsetOptions
-from .scale_factor import PaperScaleFactorOptions, ScaleFactorOptions
-from .validation import ValidationOptions
+from taiji2_estimator_pkg.core.com_offset import ComOffsetOptions, PaperComOffsetOptions
+from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorOptions, ScaleFactorOptions
+from taiji2_estimator_pkg.core.validation import ValidationOptions
 
 __all__ = [
     "DEFAULTS",
@@ -70,12 +70,9 @@ NODE_DEFAULTS: dict[str, dict[str, Any]] = {
 
 def default_parameters_file() -> Path | None:
     """``config/estimators.yaml`` of the source tree or of an installation, if found."""
-    here = Path(__file__).resolve()
-    candidates = [here.parents[2] / "config" / "estimators.yaml"]
-    candidates += [parent / "share" / "taiji2_estimator_pkg" / "config" / "estimators.yaml" for parent in here.parents]
-    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
-        if prefix:
-            candidates.append(Path(prefix) / "share" / "taiji2_estimator_pkg" / "config" / "estimators.yaml")
+    from taiji2_model.package_files import config_dirs
+
+    candidates = [directory / "estimators.yaml" for directory in config_dirs("taiji2_estimator_pkg")]
     return next((c for c in candidates if c.is_file()), None)
 
 

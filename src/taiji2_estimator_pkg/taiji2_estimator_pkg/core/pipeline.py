@@ -14,16 +14,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .com_offset import (
+from taiji2_estimator_pkg.core.com_offset import (
     ComOffsetEstimate,
     ComOffsetEstimator,
     ComOffsetOptions,
     PaperComOffsetFilter,
     PaperComOffsetOptions,
 )
-from .instrument import InstrumentModel
-from .parameters import NODE_DEFAULTS
-from .scale_factor import (
+from taiji2_estimator_pkg.core.instrument import InstrumentModel
+from taiji2_estimator_pkg.core.parameters import NODE_DEFAULTS
+from taiji2_estimator_pkg.core.scale_factor import (
     PaperScaleFactorFilter,
     PaperScaleFactorOptions,
     ScaleFactorEstimate,

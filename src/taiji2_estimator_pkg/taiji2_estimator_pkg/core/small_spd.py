@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gate_estimate import _lapack
+from taiji2_estimator_pkg.core.gate_estimate import _lapack
 
 __all__ = ["spd_inverse", "spd_solve"]
 

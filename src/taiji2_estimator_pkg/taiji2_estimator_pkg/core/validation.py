@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .attitude import increment_scalar, quat_conjugate, quat_multiply
+from taiji2_estimator_pkg.core.attitude import increment_scalar, quat_conjugate, quat_multiply
 
 __all__ = ["REASONS", "BatchValidation", "Check", "InputValidator", "ValidationOptions", "validate_batch"]
 

@@ -12,11 +12,23 @@ Entry points:
 See ``docs/diagnosis.md``.
 """
 
-from .candidates import FAMILIES, Candidate, NoiseCandidate, candidate_catalog
-from .engine import DiagnosisOptions, DiagnosisResult, EffectReport, diagnose, variant_sensitivities
-from .inputs import DiagnosisInput, InputError, align_streams, commands_on_grid, prepare_input
-from .model import NominalModel
-from .report import write_report
+from taiji2_estimator_pkg.diagnosis.candidates import FAMILIES, Candidate, NoiseCandidate, candidate_catalog
+from taiji2_estimator_pkg.diagnosis.engine import (
+    DiagnosisOptions,
+    DiagnosisResult,
+    EffectReport,
+    diagnose,
+    variant_sensitivities,
+)
+from taiji2_estimator_pkg.diagnosis.inputs import (
+    DiagnosisInput,
+    InputError,
+    align_streams,
+    commands_on_grid,
+    prepare_input,
+)
+from taiji2_estimator_pkg.diagnosis.model import NominalModel
+from taiji2_estimator_pkg.diagnosis.report import write_report
 
 __all__ = [
     "FAMILIES",

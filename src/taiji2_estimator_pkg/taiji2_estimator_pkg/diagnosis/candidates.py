@@ -1,6 +1,6 @@
 """Candidate model extensions: each catalog effect as a signature in the residual channels.
 
-Every catalog effect (:mod:`taiji2_sim_pkg.core.effect_catalog`) is split into *variants*, one per
+Every catalog effect (:mod:`taiji2_model.effect_catalog`) is split into *variants*, one per
 GRS / axis / readout it can act on, each with one parameter (two for the gravity gradient: the
 quadrature pair of its 2n harmonic), in the SI unit of the simulator's parameter, so that a fitted
 magnitude can be compared with an injected one. A variant's columns are the first-order change
@@ -33,7 +33,7 @@ star_tracker_lowfreq_noise              star-tracker channel PSD ``+ f_knee^2 x 
 ======================================  ==========================================================
 
 ``tau_act`` is the exact mean thrust over each sample interval for a delay D and a lag T
-(:func:`taiji2_sim_pkg.core.timing.actuated_commands`); D0, T0 are the model's timing. A delay
+(:func:`taiji2_model.timing.actuated_commands`); D0, T0 are the model's timing. A delay
 moves the thrust of a zero-order-hold command between neighbouring samples: its signature is
 exactly piecewise linear in the delay with kinks at whole samples, so the timing candidates are
 fitted, like the nonlinearity, by an exact one-parameter scan: their series columns are the
@@ -54,17 +54,22 @@ from typing import Any
 import numpy as np
 from scipy.signal import lfilter
 
-from taiji2_sim_pkg.core.effect_catalog import (
+from taiji2_estimator_pkg.diagnosis.channels import (
+    TIMING_REACH_S,
+    Linearization,
+    Readouts,
+    actuated_torque,
+    perturbation_channels,
+)
+from taiji2_estimator_pkg.diagnosis.model import NominalModel
+from taiji2_model.effect_catalog import (
     ANGULAR_READOUTS,
     ELECTRODE_PAIRS,
     LINEAR_READOUTS,
     GravityGradient,
     suspension_filter,
 )
-from taiji2_sim_pkg.core.frames import cross
-
-from .channels import TIMING_REACH_S, Linearization, Readouts, actuated_torque, perturbation_channels
-from .model import NominalModel
+from taiji2_model.frames import cross
 
 __all__ = ["FAMILIES", "ONSET_KINDS", "TIMING_FAMILIES", "Candidate", "CandidateContext", "NoiseCandidate",
            "candidate_catalog"]
@@ -257,7 +262,7 @@ class Candidate:
 class NoiseCandidate:
     """Star-tracker noise rising at low frequency (a spectral, not a residual, signature).
 
-    The fitted amplitude is f_knee^2 [Hz^2] of :class:`~taiji2_sim_pkg.core.effect_catalog.StarTrackerLowFreqNoise`
+    The fitted amplitude is f_knee^2 [Hz^2] of :class:`~taiji2_model.effect_catalog.StarTrackerLowFreqNoise`
     (common to the three axes); the magnitude reported is f_knee [Hz].
     """
 

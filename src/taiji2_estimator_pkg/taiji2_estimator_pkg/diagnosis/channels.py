@@ -36,11 +36,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.special import eval_laguerre
 
-from taiji2_sim_pkg.core.frames import cross, quat_conjugate, quat_multiply, rotvec_from_quat
-from taiji2_sim_pkg.core.timing import actuated_commands
-
-from .inputs import DiagnosisInput
-from .model import ANGULAR_TO_LINEAR, NominalModel
+from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
+from taiji2_estimator_pkg.diagnosis.model import ANGULAR_TO_LINEAR, NominalModel
+from taiji2_model.frames import cross, quat_conjugate, quat_multiply, rotvec_from_quat
+from taiji2_model.timing import actuated_commands
 
 __all__ = [
     "CHANNELS",
@@ -143,7 +142,7 @@ def actuated_torque(torque_cmd_n_m: np.ndarray, delay_s: float, time_constant_s:
 
     The recorded command of a sample is the one held over its interval; with a delay D and a lag T
     the thrust over that interval mixes neighbouring commands exactly
-    (:func:`~taiji2_sim_pkg.core.timing.actuated_commands`).
+    (:func:`~taiji2_model.timing.actuated_commands`).
     Before the record the thrusters are taken idle, after it the last command held; the samples
     this guess touches are left out of the torque channel (:func:`torque_edges`).
     """

@@ -4,7 +4,7 @@
 the GRS voltages only. A layout written by ``taiji2 diagnose --write-config`` (``effects`` section,
 docs/diagnosis.md section 6a) names effects those estimators do not model; this module removes the
 ones they see from the raw arrays, by inverting the simulator's own definitions
-(:mod:`taiji2_sim_pkg.core.effect_catalog`) with the layout's nominal scale factors (the corrections
+(:mod:`taiji2_model.effect_catalog`) with the layout's nominal scale factors (the corrections
 are small, so the nominal values suffice):
 
 - ``cross_coupling`` imbalance (electrode gains 1 +- eta: divided out, exact) and misalignment
@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 from scipy.signal import lfilter
 
-from taiji2_sim_pkg.core.config import SimConfig
-from taiji2_sim_pkg.core.effect_catalog import ANGULAR_READOUTS, LINEAR_READOUTS, suspension_filter
-from taiji2_sim_pkg.core.frames import (
+from taiji2_model.config import SimConfig
+from taiji2_model.effect_catalog import ANGULAR_READOUTS, LINEAR_READOUTS, suspension_filter
+from taiji2_model.frames import (
     crf_to_tmrf,
     cross,
     quat_conjugate,

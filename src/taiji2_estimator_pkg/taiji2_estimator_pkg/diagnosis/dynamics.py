@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from .channels import CHANNELS
+from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
 
 __all__ = ["ResponseFit", "fit_response"]
 

@@ -33,26 +33,30 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.stats import chi2 as chi2_dist
 
-from taiji2_sim_pkg.core.config import SimConfig
-
-from .candidates import TIMING_FAMILIES, Candidate, NoiseCandidate, candidate_catalog
-from .channels import CHANNELS
-from .evaluation import (
+from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES, Candidate, NoiseCandidate, candidate_catalog
+from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
+from taiji2_estimator_pkg.diagnosis.evaluation import (
     accepted_report_data,
     held_out_deterministic,
     held_out_noise,
     how_far,
     noise_report_data,
 )
-from .extended import corrected_calibration, extend_model, extended_layout, named_extension
-from .inputs import DiagnosisInput
-from .locations import Location, LocationGrid, scan_locations, time_window
-from .model import NominalModel
-from .onset import onset_posterior
-from .partners import jointly_determined
-from .record import Record, RecordSettings, calibrate
-from .spectral import dft
-from .standing import FAMILY_VARIANTS_MAX, family_group, standing_verdict, subfamily_group
+from taiji2_estimator_pkg.diagnosis.extended import (
+    corrected_calibration,
+    extend_model,
+    extended_layout,
+    named_extension,
+)
+from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
+from taiji2_estimator_pkg.diagnosis.locations import Location, LocationGrid, scan_locations, time_window
+from taiji2_estimator_pkg.diagnosis.model import NominalModel
+from taiji2_estimator_pkg.diagnosis.onset import onset_posterior
+from taiji2_estimator_pkg.diagnosis.partners import jointly_determined
+from taiji2_estimator_pkg.diagnosis.record import Record, RecordSettings, calibrate
+from taiji2_estimator_pkg.diagnosis.spectral import dft
+from taiji2_estimator_pkg.diagnosis.standing import FAMILY_VARIANTS_MAX, family_group, standing_verdict, subfamily_group
+from taiji2_model.config import SimConfig
 
 __all__ = ["DiagnosisOptions", "DiagnosisResult", "EffectReport", "diagnose", "variant_sensitivities"]
 

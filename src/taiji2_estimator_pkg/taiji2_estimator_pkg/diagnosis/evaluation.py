@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from .candidates import Candidate, NoiseCandidate
-from .channels import CHANNELS
-from .locations import Location, LocationGrid
-from .record import Record
+from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
+from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
+from taiji2_estimator_pkg.diagnosis.locations import Location, LocationGrid
+from taiji2_estimator_pkg.diagnosis.record import Record
 
 __all__ = ["Cell", "accepted_report_data", "excess", "how_far", "signature_cells"]
 

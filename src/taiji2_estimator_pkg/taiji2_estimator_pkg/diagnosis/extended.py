@@ -20,12 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from taiji2_sim_pkg.core.effect_catalog import GravityGradient
-
-from .candidates import Candidate, candidate_catalog
-from .inputs import DiagnosisInput
-from .model import NominalModel
-from .record import RecordSettings, calibrate
+from taiji2_estimator_pkg.diagnosis.candidates import Candidate, candidate_catalog
+from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
+from taiji2_estimator_pkg.diagnosis.model import NominalModel
+from taiji2_estimator_pkg.diagnosis.record import RecordSettings, calibrate
+from taiji2_model.effect_catalog import GravityGradient
 
 __all__ = ["corrected_calibration", "extend_model", "extended_layout", "fixed_from_specs"]
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import gammaincc
 
-from .channels import CHANNELS
+from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
 
 __all__ = ["Location", "LocationGrid", "log10_tail", "scan_locations", "time_window"]
 

@@ -1,6 +1,6 @@
 """The nominal model the diagnosis compares the data with: layout, nominal parameters, noise budget.
 
-Everything comes from a simulator layout (:class:`taiji2_sim_pkg.core.config.SimConfig`, loaded
+Everything comes from a simulator layout (:class:`taiji2_model.config.SimConfig`, loaded
 with ``load_config("type1" | "type2" | path)``): the nominal model is the simulator without any
 catalog effect. Per-sample variances follow the simulator's discretisation exactly (white noise of
 one-sided ASD S at fs has variance ``S^2 fs / 2``; SRP is an exact AR(1)), so that the channel
@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from taiji2_sim_pkg.core.config import SimConfig
-from taiji2_sim_pkg.core.frames import crf_to_tmrf
-from taiji2_sim_pkg.core.noise import srp_ou_parameters
+from taiji2_model.config import SimConfig
+from taiji2_model.frames import crf_to_tmrf
+from taiji2_model.noise import srp_ou_parameters
 
 __all__ = ["ANGULAR_TO_LINEAR", "NominalModel"]
 
@@ -64,7 +64,7 @@ class NominalModel:
         Layout name.
     delay_s : float
         Command-to-GRS delay D of the data's timing conventions [s] (layout section ``timing``,
-        reduced: actuation latency plus GRS stamp offset; :mod:`taiji2_sim_pkg.core.timing`).
+        reduced: actuation latency plus GRS stamp offset; :mod:`taiji2_model.timing`).
     st_offset_s : float
         Star-tracker stamp offset against the GRS e [s] (the star tracker stamped t read the
         attitude at t - e).

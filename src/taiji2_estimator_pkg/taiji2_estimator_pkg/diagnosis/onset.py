@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from .candidates import Candidate
-from .record import Record
+from taiji2_estimator_pkg.diagnosis.candidates import Candidate
+from taiji2_estimator_pkg.diagnosis.record import Record
 
 __all__ = ["COARSE_POINTS", "onset_posterior"]
 

@@ -12,12 +12,18 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .candidates import Candidate, CandidateContext
-from .channels import Linearization, linearize, nuisance_column, nuisance_names, readouts_from_input
-from .dynamics import ResponseFit, fit_response
-from .inputs import DiagnosisInput
-from .model import NominalModel
-from .spectral import Design, NoiseSpectrum, Whitener, dft
+from taiji2_estimator_pkg.diagnosis.candidates import Candidate, CandidateContext
+from taiji2_estimator_pkg.diagnosis.channels import (
+    Linearization,
+    linearize,
+    nuisance_column,
+    nuisance_names,
+    readouts_from_input,
+)
+from taiji2_estimator_pkg.diagnosis.dynamics import ResponseFit, fit_response
+from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
+from taiji2_estimator_pkg.diagnosis.model import NominalModel
+from taiji2_estimator_pkg.diagnosis.spectral import Design, NoiseSpectrum, Whitener, dft
 
 __all__ = ["Record", "RecordSettings", "calibrate", "column_fft", "fixed_change"]
 

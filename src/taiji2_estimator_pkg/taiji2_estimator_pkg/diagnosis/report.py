@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from .channels import CHANNELS
-from .engine import DiagnosisResult
+from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
+from taiji2_estimator_pkg.diagnosis.engine import DiagnosisResult
 
 __all__ = ["write_report"]
 

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
-from .model import NominalModel
+from taiji2_estimator_pkg.diagnosis.model import NominalModel
 
 __all__ = ["ConditionedFit", "Design", "NoiseSpectrum", "Whitener", "dft", "skew"]
 
@@ -223,10 +223,10 @@ class NoiseSpectrum:
     def st_template(self, bins: np.ndarray, corner_hz: float) -> np.ndarray:
         """(K, 3) star-tracker-channel spectrum of an extra star-tracker error with knee f_knee = 1 Hz.
 
-        The extra error is the AR(1) of :class:`taiji2_sim_pkg.core.effect_catalog.StarTrackerLowFreqNoise`
+        The extra error is the AR(1) of :class:`taiji2_model.effect_catalog.StarTrackerLowFreqNoise`
         (PSD ``S_w f_knee^2 / (f^2 + f_c^2)``); it scales with f_knee^2, the fitted amplitude.
         """
-        from taiji2_sim_pkg.core.effect_catalog import StarTrackerLowFreqNoise
+        from taiji2_model.effect_catalog import StarTrackerLowFreqNoise
 
         model = self.model
         bins = np.asarray(bins)

@@ -25,9 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from taiji2_runtime.bag.bulk_decode import decode_messages
-from taiji2_runtime.bag.bulk_read import Key, RawMessages, read_raw_messages, read_sqlite3_bag
-from taiji2_runtime.bag.contract import (
+from taiji2_model.contract import (
     COMMAND_TOPIC,
     GRS_IDS,
     GRS_TOPICS,
@@ -35,6 +33,8 @@ from taiji2_runtime.bag.contract import (
     RAW_TOPICS,
     STAR_TRACKER_TOPIC,
 )
+from taiji2_runtime.bag.bulk_decode import decode_messages
+from taiji2_runtime.bag.bulk_read import Key, RawMessages, read_raw_messages, read_sqlite3_bag
 from taiji2_runtime.bag.errors import BagError
 from taiji2_runtime.bag.reading import TypeCheck, check_types, custom_data, open_reader, storage_identifier
 from taiji2_runtime.bag.sqlite3_direct import open_sqlite3_bag
@@ -332,21 +332,16 @@ def _read_raw_topics(bag: Path) -> tuple[str, dict[str, str], dict[str, TypeChec
         raise RawBagError(exc.path, exc.problem) from exc
 
 
-def load_raw_bag(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPICS),
-                 correlation: Any = None) -> RawExperiment:
+def load_raw_bag(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPICS)) -> RawExperiment:
     """Load the raw topics of the experiment bag at ``path``.
 
     Parameters
     ----------
     path : str or pathlib.Path
-        Bag directory (with ``metadata.yaml``) or a single ``.mcap`` / ``.db3`` file; or a CCSDS
-        packet file or directory, recognised by content and loaded by
-        :func:`~taiji2_estimator_pkg.io.raw_packets.load_raw_packets`.
+        Bag directory (with ``metadata.yaml``) or a single ``.mcap`` / ``.db3`` file (packet files:
+        :func:`taiji2_ground_pkg.raw_data.load_raw_data`).
     required : iterable of str
         Raw topics that must be present with usable messages (default: all four of the contract).
-    correlation : taiji2_runtime.packets.time_correlation.TimeCorrelation, optional
-        Packets only: onboard -> contract time (default: the directory's ``time_correlation.yaml``,
-        else the identity).
 
     Returns
     -------
@@ -365,12 +360,6 @@ def load_raw_bag(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPICS
     unknown = [t for t in required if t not in RAW_TOPICS]
     if unknown:
         raise ValueError(f"not raw-contract topics: {', '.join(unknown)}")
-    from taiji2_runtime.packets.files import is_packet_path
-
-    if is_packet_path(bag):
-        from .raw_packets import load_raw_packets
-
-        return load_raw_packets(bag, required=required, correlation=correlation)
     storage, custom, checks, raw = _read_raw_topics(bag)
     reports = {topic: TopicReport(topic, msgtype) for topic, msgtype in RAW_TOPICS.items()}
     usable: dict[str, list[RawMessages]] = {}

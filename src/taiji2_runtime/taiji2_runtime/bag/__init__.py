@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from .errors import BagError
+from taiji2_runtime.bag.errors import BagError
 
 __all__ = ["BagError", "BagSummary", "PlayOptions", "Player", "RecordOptions", "Recorder", "bag_info",
            "check_bag_path", "format_info", "open_reader"]

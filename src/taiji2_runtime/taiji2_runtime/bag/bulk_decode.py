@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from rosbags.typesys.store import Typestore
 
-from .bulk_read import RawPiece, gather
+from taiji2_runtime.bag.bulk_read import RawPiece, gather
 
 # rosbags node kinds (rosbags.typesys.base.Nodetype): BASE=1, NAME=2, ARRAY=3, SEQUENCE=4
 _BASE, _NAME, _ARRAY, _SEQUENCE = 1, 2, 3, 4

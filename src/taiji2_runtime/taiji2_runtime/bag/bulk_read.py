@@ -27,9 +27,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .errors import BagError
-from .reading import describe_error, storages_of
-from .sqlite3_direct import Sqlite3Bag, connect
+from taiji2_runtime.bag.errors import BagError
+from taiji2_runtime.bag.reading import describe_error, storages_of
+from taiji2_runtime.bag.sqlite3_direct import Sqlite3Bag, connect
 
 if TYPE_CHECKING:  # rosbags.rosbag2 is imported where a bag is read through it (~0.04 s)
     from rosbags.rosbag2 import Reader

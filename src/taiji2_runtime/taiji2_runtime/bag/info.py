@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from .bulk_read import gather, read_raw_messages
-from .reading import custom_data, open_reader, storage_identifier, storages_of
+from taiji2_runtime.bag.bulk_read import gather, read_raw_messages
+from taiji2_runtime.bag.reading import custom_data, open_reader, storage_identifier, storages_of
 
 _NS = 1_000_000_000
 

@@ -23,12 +23,11 @@ from typing import Any
 
 from rosbags.interfaces import Connection, ConnectionExtRosbag2
 
+from taiji2_model.contract import CLOCK_TOPIC, CLOCK_TYPE
+from taiji2_runtime.bag.reading import check_types, open_reader
+from taiji2_runtime.bag.runtime_adapter import is_publish_timeout, message_class, publishable, publisher_qos
 from taiji2_runtime.interfaces import typestore
 from taiji2_runtime.ros import rclpy
-
-from .contract import CLOCK_TOPIC, CLOCK_TYPE
-from .reading import check_types, open_reader
-from .runtime_adapter import is_publish_timeout, message_class, publishable, publisher_qos
 
 _NS = 1_000_000_000
 

@@ -22,7 +22,7 @@ from rosbags.typesys import get_types_from_idl, get_types_from_msg
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
-from .errors import BagError
+from taiji2_runtime.bag.errors import BagError
 
 if TYPE_CHECKING:
     from rosbags.rosbag2 import Reader

@@ -25,11 +25,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from taiji2_runtime.interfaces import typestore
-
-from .contract import CLOCK_TOPIC, PROVENANCE_TOPIC
-from .provenance import recorder_provenance, simulator_provenance
-from .runtime_adapter import (
+from taiji2_model.contract import CLOCK_TOPIC, PROVENANCE_TOPIC
+from taiji2_runtime.bag.provenance import recorder_provenance, simulator_provenance
+from taiji2_runtime.bag.runtime_adapter import (
     PublisherQosProbe,
     diagnostic_array,
     diagnostic_array_class,
@@ -38,7 +36,8 @@ from .runtime_adapter import (
     subscription_qos,
     to_cdr,
 )
-from .writer import BagWriter, DefinitionUnavailable
+from taiji2_runtime.bag.writer import BagWriter, DefinitionUnavailable
+from taiji2_runtime.interfaces import typestore
 
 
 @dataclass

@@ -44,7 +44,7 @@ from rosbags.rosbag2.enums import CompressionMode
 from rosbags.rosbag2.metadata import dump_qos_v8 as _rosbags_dump_qos_v8
 from rosbags.typesys.store import Typestore
 
-from .errors import BagError
+from taiji2_runtime.bag.errors import BagError
 
 
 class DefinitionUnavailable(KeyError):

@@ -14,9 +14,21 @@ import threading
 from collections.abc import Sequence
 from typing import Any
 
-from . import clock, duration, exceptions, executors, logging, node, parameter, qos, task, time, utilities
-from .context import Context, get_default_context
-from .logging import get_logger, set_default_level
+from taiji2_runtime.dds_rclpy import (
+    clock,
+    duration,
+    exceptions,
+    executors,
+    logging,
+    node,
+    parameter,
+    qos,
+    task,
+    time,
+    utilities,
+)
+from taiji2_runtime.dds_rclpy.context import Context, get_default_context
+from taiji2_runtime.dds_rclpy.logging import get_logger, set_default_level
 
 __all__ = [
     "Context", "clock", "create_node", "duration", "exceptions", "executors", "get_default_context",

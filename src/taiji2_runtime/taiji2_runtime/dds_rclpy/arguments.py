@@ -10,7 +10,7 @@ from typing import Any
 
 import yaml
 
-from .exceptions import InvalidRosArgumentsException
+from taiji2_runtime.dds_rclpy.exceptions import InvalidRosArgumentsException
 
 ROS_ARGS_FLAG = "--ros-args"
 #: severities --log-level accepts (rcutils)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import time as _time
 
-from .clock_type import ClockType
-from .time import Time
+from taiji2_runtime.dds_rclpy.clock_type import ClockType
+from taiji2_runtime.dds_rclpy.time import Time
 
 
 class Clock:

@@ -22,10 +22,9 @@ from cyclonedds.topic import Topic
 # the default configuration lives in a module of its own (standard library only): `taiji2
 # --print-cyclonedds-config` prints it on a ROS 2 machine without the cyclonedds Python package
 from taiji2_runtime.cyclonedds_config import DEFAULT_CYCLONEDDS_CONFIG, MAX_PARTICIPANTS_PER_HOST  # noqa: F401
-
-from .arguments import RosArguments, parse_ros_args
-from .exceptions import DdsUnavailableError, NotInitializedException
-from .topics import create_topic
+from taiji2_runtime.dds_rclpy.arguments import RosArguments, parse_ros_args
+from taiji2_runtime.dds_rclpy.exceptions import DdsUnavailableError, NotInitializedException
+from taiji2_runtime.dds_rclpy.topics import create_topic
 
 #: Shutdown reason prefix when a node turned out to duplicate another node's name.
 DUPLICATE_NODE_NAME = "duplicate node name"
@@ -183,7 +182,11 @@ class Context:
             if not self.ok():
                 raise NotInitializedException()
             if self._participant is None:
-                from .discovery_info import DiscoveryInfo, participant_user_data, process_start_ns
+                from taiji2_runtime.dds_rclpy.discovery_info import (
+                    DiscoveryInfo,
+                    participant_user_data,
+                    process_start_ns,
+                )
 
                 self._start_ns = process_start_ns()
                 self._participant = _domain_participant(self.domain_id, participant_user_data(self._start_ns))
@@ -207,7 +210,7 @@ class Context:
 
     def register_node(self, node: Any) -> None:
         """Claim a node's name: refused at once within the process, announced on ros_discovery_info."""
-        from .exceptions import NodeNameNonUniqueError
+        from taiji2_runtime.dds_rclpy.exceptions import NodeNameNonUniqueError
 
         fqn = node.get_fully_qualified_name()
         with self._lock:

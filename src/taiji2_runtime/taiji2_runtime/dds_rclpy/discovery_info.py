@@ -34,7 +34,7 @@ from cyclonedds.idl import IdlStruct
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
-from .topics import create_topic
+from taiji2_runtime.dds_rclpy.topics import create_topic
 
 DISCOVERY_TOPIC = "ros_discovery_info"
 START_KEY = "taiji2_start_ns"

@@ -15,9 +15,9 @@ from typing import Any
 
 from cyclonedds.core import DDSException, GuardCondition, WaitSet
 
-from .context import DUPLICATE_NODE_NAME, Context, get_default_context
-from .exceptions import NodeNameNonUniqueError, NotInitializedException
-from .task import Future
+from taiji2_runtime.dds_rclpy.context import DUPLICATE_NODE_NAME, Context, get_default_context
+from taiji2_runtime.dds_rclpy.exceptions import NodeNameNonUniqueError, NotInitializedException
+from taiji2_runtime.dds_rclpy.task import Future
 
 _TAKE_BATCH = 64
 _WAIT_SLICE_NS = 100_000_000

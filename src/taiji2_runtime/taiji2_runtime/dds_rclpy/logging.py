@@ -65,7 +65,7 @@ class RcutilsLogger:
             file=sys.stderr,
             flush=True,
         )
-        from .rosout import forward
+        from taiji2_runtime.dds_rclpy.rosout import forward
 
         forward(int(severity), self.name, str(message), ns, caller.f_code.co_filename, caller.f_code.co_name,
                 caller.f_lineno)

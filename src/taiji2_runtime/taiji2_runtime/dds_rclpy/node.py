@@ -8,22 +8,21 @@ from typing import Any
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
+from taiji2_runtime.dds_rclpy.arguments import node_matches, parse_ros_args
+from taiji2_runtime.dds_rclpy.clock import Clock, ROSClock
+from taiji2_runtime.dds_rclpy.clock_type import ClockType
+from taiji2_runtime.dds_rclpy.context import Context, forget_deleted_entities, get_default_context
+from taiji2_runtime.dds_rclpy.exceptions import NotInitializedException
+from taiji2_runtime.dds_rclpy.logging import RcutilsLogger, get_logger
+from taiji2_runtime.dds_rclpy.names import expand_topic_name, normalize_namespace, remap_topic_name, validate_node_name
+from taiji2_runtime.dds_rclpy.node_parameters import ParameterMixin
+from taiji2_runtime.dds_rclpy.parameter import Parameter
+from taiji2_runtime.dds_rclpy.publisher import Publisher
+from taiji2_runtime.dds_rclpy.qos import QoSProfile, coerce_qos, qos_profile_clock, to_dds_qos
+from taiji2_runtime.dds_rclpy.subscription import Subscription
+from taiji2_runtime.dds_rclpy.time import Time
+from taiji2_runtime.dds_rclpy.timer import Timer
 from taiji2_runtime.interfaces import message_class, ros_type_name, type_hash
-
-from .arguments import node_matches, parse_ros_args
-from .clock import Clock, ROSClock
-from .clock_type import ClockType
-from .context import Context, forget_deleted_entities, get_default_context
-from .exceptions import NotInitializedException
-from .logging import RcutilsLogger, get_logger
-from .names import expand_topic_name, normalize_namespace, remap_topic_name, validate_node_name
-from .node_parameters import ParameterMixin
-from .parameter import Parameter
-from .publisher import Publisher
-from .qos import QoSProfile, coerce_qos, qos_profile_clock, to_dds_qos
-from .subscription import Subscription
-from .time import Time
-from .timer import Timer
 
 _NS = 1_000_000_000
 _CLOCK_TOPIC = "/clock"
@@ -94,11 +93,11 @@ class Node(ParameterMixin):
                 if not self.has_parameter(name):
                     self.declare_parameter(name, value)
         if start_parameter_services:
-            from .parameter_services import start_parameter_services as start
+            from taiji2_runtime.dds_rclpy.parameter_services import start_parameter_services as start
 
             self._services = start(self)
         if enable_rosout:
-            from . import rosout
+            from taiji2_runtime.dds_rclpy import rosout
 
             self._rosout = self._make_publisher(message_class("rcl_interfaces/msg/Log"), rosout.ROSOUT_TOPIC,
                                                 rosout.qos_profile_rosout_default)
@@ -267,7 +266,7 @@ class Node(ParameterMixin):
             if alive:
                 service.destroy()
         if self._rosout is not None:
-            from . import rosout
+            from taiji2_runtime.dds_rclpy import rosout
 
             rosout.detach(self._logger.name)
             if alive:

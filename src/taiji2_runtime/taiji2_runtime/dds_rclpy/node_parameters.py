@@ -5,15 +5,14 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from taiji2_runtime.interfaces import message_class
-
-from .exceptions import (
+from taiji2_runtime.dds_rclpy.exceptions import (
     InvalidParameterTypeException,
     InvalidParameterValueException,
     ParameterAlreadyDeclaredException,
     ParameterNotDeclaredException,
 )
-from .parameter import Parameter
+from taiji2_runtime.dds_rclpy.parameter import Parameter
+from taiji2_runtime.interfaces import message_class
 
 
 def _descriptor_class() -> type:

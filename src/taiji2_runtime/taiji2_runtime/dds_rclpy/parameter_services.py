@@ -10,11 +10,10 @@ from __future__ import annotations
 
 from typing import Any
 
+from taiji2_runtime.dds_rclpy.exceptions import ParameterNotDeclaredException
+from taiji2_runtime.dds_rclpy.parameter import PARAMETER_SEPARATOR_STRING, Parameter
+from taiji2_runtime.dds_rclpy.service import Service
 from taiji2_runtime.interfaces import message_class
-
-from .exceptions import ParameterNotDeclaredException
-from .parameter import PARAMETER_SEPARATOR_STRING, Parameter
-from .service import Service
 
 _T = Parameter.Type
 #: ParameterValue field holding each parameter type's value

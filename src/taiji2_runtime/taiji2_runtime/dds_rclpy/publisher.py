@@ -10,8 +10,8 @@ from cyclonedds.core import DDSException
 from cyclonedds.pub import DataWriter
 from cyclonedds.util import duration
 
-from .duration import Duration
-from .qos import QoSProfile
+from taiji2_runtime.dds_rclpy.duration import Duration
+from taiji2_runtime.dds_rclpy.qos import QoSProfile
 
 #: Longest a reliable write waits for a slow reader before the sample is given up for it [s].
 DEFAULT_WRITE_TIMEOUT_S = 30.0

@@ -12,9 +12,8 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+from taiji2_runtime.dds_rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from taiji2_runtime.interfaces import message_class
-
-from .qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 ROSOUT_TOPIC = "/rosout"
 qos_profile_rosout_default = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,

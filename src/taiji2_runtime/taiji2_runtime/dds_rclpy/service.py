@@ -17,7 +17,7 @@ from cyclonedds.core import InstanceState, Policy, Qos, ReadCondition, SampleSta
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
-from .service_types import service_type_hash, wire_class
+from taiji2_runtime.dds_rclpy.service_types import service_type_hash, wire_class
 
 #: rmw_qos_profile_services_default
 _DEPTH = 10

@@ -17,8 +17,8 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.util import duration
 
-from .service import _DEPTH, _service_id
-from .service_types import service_body_class, service_type_hash, wire_class
+from taiji2_runtime.dds_rclpy.service import _DEPTH, _service_id
+from taiji2_runtime.dds_rclpy.service_types import service_body_class, service_type_hash, wire_class
 
 #: a request not answered within this long [s] is sent again (see :meth:`ServiceClient.call`)
 _RESEND_S = 1.0

@@ -9,7 +9,7 @@ from cyclonedds._clayer import ddspy_take
 from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
 from cyclonedds.sub import DataReader
 
-from .qos import QoSProfile
+from taiji2_runtime.dds_rclpy.qos import QoSProfile
 
 
 class Subscription:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from .clock_type import ClockType
-from .duration import Duration
+from taiji2_runtime.dds_rclpy.clock_type import ClockType
+from taiji2_runtime.dds_rclpy.duration import Duration
 
 _NS = 1_000_000_000
 

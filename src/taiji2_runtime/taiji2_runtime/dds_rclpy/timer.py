@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from .clock import Clock
+from taiji2_runtime.dds_rclpy.clock import Clock
 
 
 class Timer:

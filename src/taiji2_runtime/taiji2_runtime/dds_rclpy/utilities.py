@@ -1,6 +1,6 @@
 """rclpy.utilities subset."""
 
-from .arguments import remove_ros_args
-from .context import get_default_context
+from taiji2_runtime.dds_rclpy.arguments import remove_ros_args
+from taiji2_runtime.dds_rclpy.context import get_default_context
 
 __all__ = ["get_default_context", "remove_ros_args"]

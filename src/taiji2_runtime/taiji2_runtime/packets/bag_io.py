@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bag.contract import RAW_FRAME_IDS, RAW_TOPICS
-from .bulk_decode import DecodedPackets, StreamData
-from .definition import STREAMS
+from taiji2_model.contract import RAW_FRAME_IDS, RAW_TOPICS
+from taiji2_runtime.packets.bulk_decode import DecodedPackets, StreamData
+from taiji2_runtime.packets.definition import STREAMS
 
 __all__ = ["read_bag_streams", "write_bag"]
 
@@ -32,11 +32,11 @@ def read_bag_streams(path: str | Path) -> tuple[dict[str, tuple[np.ndarray, np.n
     BagError
         One line naming the bag and the problem (unreadable, not a bag, no raw topic).
     """
-    from ..bag.bulk_decode import decode_messages
-    from ..bag.bulk_read import read_raw_messages
-    from ..bag.errors import BagError
-    from ..bag.reading import open_reader
-    from ..typestore import contract_typestore
+    from taiji2_runtime.bag.bulk_decode import decode_messages
+    from taiji2_runtime.bag.bulk_read import read_raw_messages
+    from taiji2_runtime.bag.errors import BagError
+    from taiji2_runtime.bag.reading import open_reader
+    from taiji2_runtime.typestore import contract_typestore
 
     store = contract_typestore()
     with open_reader(path) as reader:
@@ -100,9 +100,9 @@ def write_bag(path: str | Path, decoded: DecodedPackets, *, storage: str = "mcap
     BagError
         If the bag cannot be created (exists, unwritable).
     """
-    from ..bag.bulk_decode import encode_messages
-    from ..bag.writer import BagWriter
-    from ..typestore import contract_typestore
+    from taiji2_runtime.bag.bulk_decode import encode_messages
+    from taiji2_runtime.bag.writer import BagWriter
+    from taiji2_runtime.typestore import contract_typestore
 
     store = contract_typestore()
     streams = dict(decoded.streams)

@@ -14,14 +14,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from spacepackets.ccsds.spacepacket import PacketId, PacketSeqCtrl, PacketType
 
-from .cuc import cuc_decode_ns
-from .definition import CUC_PFIELD, STREAM_BY_APID, STREAMS, TC_APID, StreamDefinition
-from .packetize import PacketError
-from .report import PacketReport
-from .sequence import order_by_sequence
-from .telecommand import decode_torque_tc
-from .time_correlation import TimeCorrelation
-from .walk import walk_packets
+from taiji2_runtime.packets.cuc import cuc_decode_ns
+from taiji2_runtime.packets.definition import CUC_PFIELD, STREAM_BY_APID, STREAMS, TC_APID, StreamDefinition
+from taiji2_runtime.packets.packetize import PacketError
+from taiji2_runtime.packets.report import PacketReport
+from taiji2_runtime.packets.sequence import order_by_sequence
+from taiji2_runtime.packets.telecommand import decode_torque_tc
+from taiji2_runtime.packets.time_correlation import TimeCorrelation
+from taiji2_runtime.packets.walk import walk_packets
 
 __all__ = ["DecodedPackets", "StreamData", "decode_packet_buffers"]
 

@@ -13,11 +13,11 @@ import numpy as np
 from fastcrc import crc16
 from spacepackets.ccsds.spacepacket import PacketType, SequenceFlags, SpacePacketHeader
 
-from .cuc import cuc_encode_ns
-from .definition import CUC_PFIELD, STREAMS, StreamDefinition
-from .packetize import SEQ_MODULO
-from .telecommand import TC_PACKET_OCTETS, encode_torque_tc
-from .time_correlation import TimeCorrelation
+from taiji2_runtime.packets.cuc import cuc_encode_ns
+from taiji2_runtime.packets.definition import CUC_PFIELD, STREAMS, StreamDefinition
+from taiji2_runtime.packets.packetize import SEQ_MODULO
+from taiji2_runtime.packets.telecommand import TC_PACKET_OCTETS, encode_torque_tc
+from taiji2_runtime.packets.time_correlation import TimeCorrelation
 
 __all__ = ["encode_stream", "encode_streams", "encode_telecommands"]
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .definition import CUC_FINE_OCTETS, CUC_PFIELD
+from taiji2_runtime.packets.definition import CUC_FINE_OCTETS, CUC_PFIELD
 
 __all__ = ["CucError", "cuc_decode_ns", "cuc_encode", "cuc_encode_ns", "cuc_pack", "cuc_unpack_ns"]
 

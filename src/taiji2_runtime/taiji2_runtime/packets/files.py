@@ -12,9 +12,9 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .bulk_decode import DecodedPackets, decode_packet_buffers
-from .time_correlation import TimeCorrelation, load_time_correlation
-from .walk import _sound
+from taiji2_runtime.packets.bulk_decode import DecodedPackets, decode_packet_buffers
+from taiji2_runtime.packets.time_correlation import TimeCorrelation, load_time_correlation
+from taiji2_runtime.packets.walk import _sound
 
 __all__ = ["PacketFileError", "is_packet_file", "is_packet_path", "packet_files", "read_packets", "write_packets"]
 

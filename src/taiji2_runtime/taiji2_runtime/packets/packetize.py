@@ -16,8 +16,8 @@ import numpy as np
 from fastcrc import crc16
 from spacepackets.ccsds.spacepacket import PacketId, PacketSeqCtrl, PacketType, SequenceFlags, SpacePacketHeader
 
-from .cuc import CucError, cuc_pack, cuc_unpack_ns
-from .definition import (
+from taiji2_runtime.packets.cuc import CucError, cuc_pack, cuc_unpack_ns
+from taiji2_runtime.packets.definition import (
     CRC_OCTETS,
     IDLE_APID,
     PRIMARY_HEADER_OCTETS,

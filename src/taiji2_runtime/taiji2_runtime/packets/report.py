@@ -6,7 +6,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
-from .definition import STREAM_BY_APID, TC_APID
+from taiji2_runtime.packets.definition import STREAM_BY_APID, TC_APID
 
 __all__ = ["APID_COUNTS", "PacketReport"]
 

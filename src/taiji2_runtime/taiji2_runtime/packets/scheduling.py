@@ -29,10 +29,16 @@ from spacepackets.ecss.req_id import RequestId
 from spacepackets.ecss.tc import PusTc
 from spacepackets.ecss.tm import ManagedParams
 
-from .cuc import CucError, cuc_pack, cuc_unpack_ns
-from .definition import TC_APID
-from .packetize import SEQ_MODULO, PacketError
-from .telecommand import TC_PACKET_OCTETS, TorqueCommand, decode_torque_tc, encode_torque_tc, unpack_telecommand
+from taiji2_runtime.packets.cuc import CucError, cuc_pack, cuc_unpack_ns
+from taiji2_runtime.packets.definition import TC_APID
+from taiji2_runtime.packets.packetize import SEQ_MODULO, PacketError
+from taiji2_runtime.packets.telecommand import (
+    TC_PACKET_OCTETS,
+    TorqueCommand,
+    decode_torque_tc,
+    encode_torque_tc,
+    unpack_telecommand,
+)
 
 __all__ = ["FAILURE_CAPACITY", "FAILURE_LATE", "MAX_ACTIVITIES_PER_TC", "REPORT_APID", "Activity",
            "VerificationReport", "decode_insert_activities", "decode_report", "encode_insert_activities",

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .packetize import SEQ_MODULO
+from taiji2_runtime.packets.packetize import SEQ_MODULO
 
 __all__ = ["SequenceOrder", "order_by_sequence"]
 

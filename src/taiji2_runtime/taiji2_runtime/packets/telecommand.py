@@ -14,9 +14,9 @@ import numpy as np
 from spacepackets.ecss.tc import InvalidTcCrc16Error, PusTc
 from spacepackets.exceptions import BytesTooShortError
 
-from .cuc import CucError, cuc_pack, cuc_unpack_ns
-from .definition import TC_APID, TC_SERVICE, TC_SUBTYPE_TORQUE
-from .packetize import SEQ_MODULO, PacketError
+from taiji2_runtime.packets.cuc import CucError, cuc_pack, cuc_unpack_ns
+from taiji2_runtime.packets.definition import TC_APID, TC_SERVICE, TC_SUBTYPE_TORQUE
+from taiji2_runtime.packets.packetize import SEQ_MODULO, PacketError
 
 __all__ = ["TC_APP_DATA_OCTETS", "TC_PACKET_OCTETS", "TorqueCommand", "decode_torque_tc", "encode_torque_tc"]
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from fastcrc import crc16
 
-from .definition import STREAM_BY_APID, TC_APID
+from taiji2_runtime.packets.definition import STREAM_BY_APID, TC_APID
 
 __all__ = ["Walk", "walk_packets"]
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .frames import _hamilton_product
+from taiji2_model.frames import _hamilton_product
 
 __all__ = ["BLOCK_STEPS", "EPOCH_STEPS", "AttitudeScan"]
 

@@ -27,14 +27,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .attitude_scan import AttitudeScan
-from .frames import (
+from taiji2_model.frames import (
     apply_matrix,
     apply_matrix_rows,
     cross,
     cross_rows,
     quat_from_rotvec,
 )
+from taiji2_sim_pkg.core.attitude_scan import AttitudeScan
 
 __all__ = ["AttitudeSteps", "gyroscopic_torque_n_m", "propagate_attitude"]
 

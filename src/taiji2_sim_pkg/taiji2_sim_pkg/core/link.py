@@ -187,9 +187,9 @@ class LinkModel:
 
 
 def _presets_path() -> Path:
-    from .config import _config_dirs
+    from taiji2_model.package_files import config_dirs
 
-    for directory in _config_dirs():
+    for directory in config_dirs("taiji2_sim_pkg"):
         if (directory / PRESETS_FILE).is_file():
             return directory / PRESETS_FILE
     raise LinkError(f"link presets file {PRESETS_FILE} not found in the package's config directories")

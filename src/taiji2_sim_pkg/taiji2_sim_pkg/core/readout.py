@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .effects import Effect
-from .frames import apply_matrix_components, matrix_pattern
+from taiji2_model.effects import Effect
+from taiji2_model.frames import apply_matrix_components, matrix_pattern
 
 __all__ = ["GRS_FIELDS", "GrsConstants", "grs_readouts_into"]
 

@@ -33,15 +33,22 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.signal import lfilter
 
-from .config import SimConfig
-from .dynamics import AttitudeSteps, propagate_attitude
-from .effects import Effect
-from .frames import apply_matrix, crf_to_tmrf, quat_conjugate, quat_from_rotvec, quat_multiply, rotvec_from_quat
-from .grs import coupling_acceleration_m_s2, voltages_from_accelerations
-from .noise import NoiseStreams, noise_rng, srp_ou_parameters, white_noise_std
-from .simulator import SimOutput, SimTruth
-from .star_tracker import star_tracker_covariance_rad2, star_tracker_measurement
-from .timing import actuated_commands
+from taiji2_model.config import SimConfig
+from taiji2_model.effects import Effect
+from taiji2_model.frames import (
+    apply_matrix,
+    crf_to_tmrf,
+    quat_conjugate,
+    quat_from_rotvec,
+    quat_multiply,
+    rotvec_from_quat,
+)
+from taiji2_model.grs import coupling_acceleration_m_s2, voltages_from_accelerations
+from taiji2_model.noise import NoiseStreams, noise_rng, srp_ou_parameters, white_noise_std
+from taiji2_model.timing import actuated_commands
+from taiji2_sim_pkg.core.dynamics import AttitudeSteps, propagate_attitude
+from taiji2_sim_pkg.core.simulator import SimOutput, SimTruth
+from taiji2_sim_pkg.core.star_tracker import star_tracker_covariance_rad2, star_tracker_measurement
 
 __all__ = ["ReferenceSettings", "simulate_reference"]
 
@@ -86,7 +93,7 @@ def _fir(offsets_s: np.ndarray, cutoff_hz: float, half_width_s: float, beta: flo
 
 def _timing(config: SimConfig, effects: Sequence[Effect]) -> tuple[float, float, float, float]:
     """(GRS stamp offset, star-tracker offset, actuation latency, thruster time constant) [s]."""
-    from .effect_catalog import TimeOffset  # the catalog builds on the simulator modules
+    from taiji2_model.effect_catalog import TimeOffset  # the catalog builds on the simulator modules
 
     timing = config.timing
     st_extra = 0.0
@@ -231,7 +238,7 @@ def simulate_reference(config: SimConfig, seed: int, torque_cmd_n_m: ArrayLike, 
             fields[key][:, index] = value
 
     # star tracker: attitude averaged over the exposure ---------------------------------------------
-    from .effect_catalog import TimeOffset
+    from taiji2_model.effect_catalog import TimeOffset
 
     reads = stamps - st_offset_s
     for effect in effects:  # a star-tracker offset from an onset on (before it: the conventions')

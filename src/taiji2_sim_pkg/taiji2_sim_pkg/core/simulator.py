@@ -28,16 +28,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .attitude_scan import AttitudeScan
-from .config import SimConfig, TimingConfig
-from .dynamics import propagate_attitude
-from .effects import Effect
-from .frames import crf_to_tmrf
-from .maneuver import SquareWaveManeuver
-from .noise import NoiseStreams
-from .readout import GRS_FIELDS, GrsConstants, grs_readouts_into
-from .star_tracker import star_tracker_covariance_rad2, star_tracker_measurement
-from .timing import actuation_weights, apply_actuation
+from taiji2_model.config import SimConfig, TimingConfig
+from taiji2_model.effects import Effect
+from taiji2_model.frames import crf_to_tmrf
+from taiji2_model.maneuver import SquareWaveManeuver
+from taiji2_model.noise import NoiseStreams
+from taiji2_model.timing import actuation_weights, apply_actuation
+from taiji2_sim_pkg.core.attitude_scan import AttitudeScan
+from taiji2_sim_pkg.core.dynamics import propagate_attitude
+from taiji2_sim_pkg.core.readout import GRS_FIELDS, GrsConstants, grs_readouts_into
+from taiji2_sim_pkg.core.star_tracker import star_tracker_covariance_rad2, star_tracker_measurement
 
 #: Steps per chunk of the readout computation (temporaries of a few 100 kB, in cache).
 _READOUT_CHUNK_STEPS = 4096
@@ -242,7 +242,7 @@ class Simulator:
             self._command_history = np.zeros((max(m_first + weights.size - 1, 0), 3))
         hooks = list(self._effects)
         if st_offset_s != 0.0:
-            from .effect_catalog import TimeOffset  # the catalog builds on this module's Effect users
+            from taiji2_model.effect_catalog import TimeOffset  # the catalog builds on this module's Effect users
 
             hooks.append(TimeOffset(st_offset_s))
         self._hooks = tuple(hooks)

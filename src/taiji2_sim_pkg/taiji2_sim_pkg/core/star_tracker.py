@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .frames import quat_conjugate, quat_from_rotvec, quat_multiply, rotvec_from_quat
+from taiji2_model.frames import quat_conjugate, quat_from_rotvec, quat_multiply, rotvec_from_quat
 
 __all__ = ["attitude_error_rad", "star_tracker_covariance_rad2", "star_tracker_measurement"]
 

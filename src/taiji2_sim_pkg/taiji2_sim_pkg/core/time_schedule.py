@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .link import LinkModel
+from taiji2_sim_pkg.core.link import LinkModel
 
 __all__ = ["OnboardSchedule", "PlanError", "UplinkTable", "maneuver_activities", "plan_uplinks"]
 

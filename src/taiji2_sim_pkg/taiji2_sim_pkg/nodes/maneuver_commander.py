@@ -1,7 +1,7 @@
 """maneuver_commander: publishes the square-wave calibration torque on /taiji2/maneuver/command.
 
-Thin ROS glue around :class:`taiji2_sim_pkg.core.maneuver.SquareWaveManeuver`, or any maneuver
-family of :mod:`taiji2_sim_pkg.core.maneuver_families` read from ``maneuver_file`` (e.g. written by
+Thin ROS glue around :class:`taiji2_model.maneuver.SquareWaveManeuver`, or any maneuver
+family of :mod:`taiji2_model.maneuver_families` read from ``maneuver_file`` (e.g. written by
 ``taiji2 design``; the square-wave keys are then ignored). Parameters are
 documented in ``config/maneuver_commander.yaml``. The command is published at every tick of
 ``publish_rate_hz`` on the node clock (so at each change, delayed by at most one tick, and at least
@@ -16,12 +16,12 @@ from typing import Any
 
 import numpy as np
 
+from taiji2_model.config import builtin_layouts, load_config
+from taiji2_model.maneuver import SquareWaveManeuver
+from taiji2_model.maneuver_families import check_thrust, load_maneuver_file, maneuver_spec
 from taiji2_runtime import node_parameters
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages, rclpy
-from taiji2_sim_pkg.core.config import builtin_layouts, load_config
-from taiji2_sim_pkg.core.maneuver import SquareWaveManeuver
-from taiji2_sim_pkg.core.maneuver_families import check_thrust, load_maneuver_file, maneuver_spec
 
 COMMAND_TOPIC = "/taiji2/maneuver/command"
 _NS = 1e-9

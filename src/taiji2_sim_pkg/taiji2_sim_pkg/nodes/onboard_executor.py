@@ -19,13 +19,13 @@ import json
 from collections.abc import Sequence
 from typing import Any
 
+from taiji2_runtime import link_topics as lt
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.packetize import PacketError
 from taiji2_runtime.packets.scheduling import FAILURE_CAPACITY, FAILURE_LATE, decode_insert_activities, encode_report
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.time_schedule import OnboardSchedule
-from taiji2_sim_pkg.nodes import link_topics as lt
 
 _NS = 1_000_000_000
 REPORTS_TOPIC = "/onboard/link/tm_reports"

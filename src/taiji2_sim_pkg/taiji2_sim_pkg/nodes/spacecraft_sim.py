@@ -26,10 +26,10 @@ from typing import Any
 import numpy as np
 import yaml
 
+from taiji2_model.config import load_config
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.command_gate import CommandGate, CommandSchedule
-from taiji2_sim_pkg.core.config import load_config
 from taiji2_sim_pkg.core.range_check import RangeMonitor
 from taiji2_sim_pkg.core.simulator import SimOutput, SimSample, Simulator
 

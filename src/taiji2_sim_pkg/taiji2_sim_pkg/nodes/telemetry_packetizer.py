@@ -17,13 +17,13 @@ import heapq
 from collections.abc import Sequence
 from typing import Any
 
+from taiji2_runtime import link_topics as lt
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.definition import STREAMS
 from taiji2_runtime.packets.packetize import encode_packet
 from taiji2_runtime.ros import messages, rclpy
-from taiji2_sim_pkg.nodes import link_topics as lt
-from taiji2_sim_pkg.nodes.subscribed_publisher import hold_until_subscribed
+from taiji2_runtime.subscribed_publisher import hold_until_subscribed
 
 _NS = 1_000_000_000
 

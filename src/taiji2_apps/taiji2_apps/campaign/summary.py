@@ -1,0 +1,115 @@
+"""Per-parameter statistics of a campaign, with bootstrap 95 % intervals over seeds.
+
+For each (group, method, parameter): the number of seeds, mean error, error std, mean reported
+sigma, the CRLB, and the ratios std / CRLB (efficiency) and std / mean sigma (honesty of the
+reported covariance). Scale factors are expressed relative to truth in %, offsets in um.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from taiji2_apps.campaign.case import PARAMETERS
+
+#: Bootstrap resamples and seed (the intervals are reproducible).
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_SEED = 20261124
+
+
+@dataclass
+class ParameterSummary:
+    """Statistics of one parameter over the seeds of one group and method."""
+
+    group: str
+    method: str
+    parameter: str
+    unit: str
+    n: int
+    mean_error: float
+    error_std: float
+    mean_sigma: float
+    crlb: float
+    std_over_crlb: float
+    std_over_crlb_lo: float
+    std_over_crlb_hi: float
+    std_over_sigma: float
+    std_over_sigma_lo: float
+    std_over_sigma_hi: float
+
+
+def summarize_table(table: object) -> list[ParameterSummary]:
+    """Summaries of the ``status == "ok"`` rows of a campaign table (pyarrow.Table)."""
+    columns = table.to_pydict()
+    ok = np.array([s == "ok" for s in columns["status"]])
+    # groups and methods in order of appearance, parameters in the order the cases write them
+    keys = list(dict.fromkeys((g, m, p) for g, m, p, good in zip(columns["group"], columns["method"],
+                                                                 columns["parameter"], ok, strict=True) if good))
+    keys.sort(key=lambda k: (k[0], k[1], PARAMETERS.index(k[2]) if k[2] in PARAMETERS else len(PARAMETERS)))
+    group = np.array(columns["group"], dtype=object)
+    method = np.array(columns["method"], dtype=object)
+    parameter = np.array(columns["parameter"], dtype=object)
+    arrays = {k: np.array(columns[k], dtype=float) for k in ("error", "sigma", "truth", "crlb")}
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    out = []
+    for g, m, p in keys:
+        sel = ok & (group == g) & (method == m) & (parameter == p)
+        scale, unit = (100.0 / np.abs(arrays["truth"][sel]), "%") if ".G_" in p else (np.full(sel.sum(), 1e6), "um")
+        err = arrays["error"][sel] * scale
+        sig = arrays["sigma"][sel] * scale
+        crlb = float(np.mean(arrays["crlb"][sel] * scale))
+        out.append(_summary(g, m, p, unit, err, sig, crlb, rng))
+    return out
+
+
+def _summary(group: str, method: str, parameter: str, unit: str, err: np.ndarray, sig: np.ndarray, crlb: float,
+             rng: np.random.Generator) -> ParameterSummary:
+    n = err.size
+    std = float(err.std(ddof=1)) if n > 1 else float("nan")
+    mean_sig = float(sig.mean())
+    if n > 1:
+        # bootstrap over seeds: resample (error, sigma) pairs together
+        idx = rng.integers(0, n, size=(BOOTSTRAP_RESAMPLES, n))
+        boot_std = err[idx].std(axis=1, ddof=1)
+        boot_sig = sig[idx].mean(axis=1)
+        crlb_lo, crlb_hi = np.percentile(boot_std / crlb, [2.5, 97.5])
+        sig_lo, sig_hi = np.percentile(boot_std / boot_sig, [2.5, 97.5])
+    else:
+        crlb_lo = crlb_hi = sig_lo = sig_hi = float("nan")
+    return ParameterSummary(group, method, parameter, unit, n, float(err.mean()), std, mean_sig, crlb,
+                            std / crlb, float(crlb_lo), float(crlb_hi), std / mean_sig, float(sig_lo), float(sig_hi))
+
+
+def format_summary(summaries: Sequence[ParameterSummary]) -> str:
+    """A plain-text table, one block per group and method."""
+    lines: list[str] = []
+    current = None
+    for s in summaries:
+        if (s.group, s.method) != current:
+            current = (s.group, s.method)
+            lines += ["", f"== {s.group} | method {s.method} | {s.n} seeds ==",
+                      f"  {'parameter':14} {'unit':>4} {'mean err':>10} {'err std':>10} {'mean sig':>10} "
+                      f"{'CRLB':>10} {'std/CRLB [95% CI]':>22} {'std/sig [95% CI]':>22}"]
+        lines.append(f"  {s.parameter:14} {s.unit:>4} {s.mean_error:10.4g} {s.error_std:10.4g} {s.mean_sigma:10.4g} "
+                     f"{s.crlb:10.4g} {s.std_over_crlb:6.2f} [{s.std_over_crlb_lo:5.2f}, {s.std_over_crlb_hi:5.2f}]"
+                     f"   {s.std_over_sigma:6.2f} [{s.std_over_sigma_lo:5.2f}, {s.std_over_sigma_hi:5.2f}]")
+    return "\n".join(lines).lstrip("\n")
+
+
+def save_summary(summaries: Sequence[ParameterSummary], out_dir: Path) -> list[Path]:
+    """``summary.csv`` and ``summary.txt`` in ``out_dir``."""
+    import csv
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    csv_path = out_dir / "summary.csv"
+    with open(csv_path, "w", newline="", encoding="utf-8") as stream:
+        fields = list(ParameterSummary.__dataclass_fields__)
+        writer = csv.DictWriter(stream, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(asdict(s) for s in summaries)
+    txt_path = out_dir / "summary.txt"
+    txt_path.write_text(format_summary(summaries) + "\n", encoding="utf-8")
+    return [csv_path, txt_path]

@@ -1,0 +1,227 @@
+"""Options and model of the default (``gls``) scale-factor estimator: the attitude driven by the fused
+GRS angular acceleration, the readout difference of the two GRS. Equations: docs/estimators.md,
+section 4."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from taiji2_estimator_pkg.core.factored_steady import RegressorFactors
+from taiji2_estimator_pkg.core.instrument import InstrumentModel
+from taiji2_estimator_pkg.core.twostage import StateSpaceModel
+from taiji2_estimator_pkg.core.validation import ValidationOptions
+
+
+@dataclass(frozen=True)
+class ScaleFactorOptions:
+    """Options of the default (``gls``) scale-factor estimator.
+
+    Attributes
+    ----------
+    gate_probability : float or None
+        False-alarm probability of the chi-square gate per update (None: no gating).
+    gate_refresh_s : float
+        Per-sample path: the gates test each epoch against the estimate of the data before the first
+        epoch of its span of this much data time, solved once per span (:mod:`.gate_span`) [s]; at most
+        one sample period: a solve at every epoch.
+    max_bridged_gap_s : float
+        Longest gap [s] bridged by the state prediction; longer gaps restart the attitude state.
+    gap_acceleration_sigma_rad_s2 : float
+        1-sigma of the change of the angular acceleration since the last GRS sample, over a step
+        without GRS data (whose input is that sample's, held) [rad s^-2].
+    snap_tolerance : float
+        Relative distance at which the filter covariance is set back to its steady state.
+    determination_margin : float
+        Two GRS: the estimate is published once the marginal information on G exceeds this
+        multiple of the statistical fluctuation of the bias-corrected GRS-pair term.
+    validation : ValidationOptions
+        Input checks.
+    """
+
+    gate_probability: float | None = 1e-6
+    gate_refresh_s: float = 1.0
+    max_bridged_gap_s: float = 10.0
+    gap_acceleration_sigma_rad_s2: float = 1e-9
+    snap_tolerance: float = 1e-10
+    determination_margin: float = 20.0
+    validation: ValidationOptions = field(default_factory=ValidationOptions)
+
+    def __post_init__(self) -> None:
+        if not (self.gate_refresh_s >= 0.0 and math.isfinite(self.gate_refresh_s)):
+            raise ValueError(f"gate_refresh_s: a finite time >= 0 [s], got {self.gate_refresh_s!r}")
+
+
+class ScaleFactorModel:
+    """State-space model of the attitude driven by the GRS, in decoupled coordinates.
+
+    The star-tracker noise is whitened (``T = R^-1/2``) and the axes rotated (``U^T``) so that the
+    fused process noise is diagonal: ``y'' = M y``, ``a'' = M a``, ``M = U^T T``. Each axis is then
+    an independent double integrator with unit measurement noise, which makes the steady-state
+    closed loop block diagonal (2 x 2 per axis) for the bulk path.
+
+    Parameters
+    ----------
+    instrument : InstrumentModel
+        Geometry and noise budget.
+    grs_ids : sequence of int
+        One or two GRS ids.
+    """
+
+    def __init__(self, instrument: InstrumentModel, grs_ids: Sequence[int]) -> None:
+        self.instrument = instrument
+        self.grs_ids = tuple(int(g) for g in grs_ids)
+        if not 1 <= len(self.grs_ids) <= 2 or len(set(self.grs_ids)) != len(self.grs_ids):
+            raise ValueError(f"grs_ids: one or two distinct ids, got {grs_ids!r}")
+        self.dt = instrument.dt_s
+        self.c = {g: instrument.c(g) for g in self.grs_ids}
+        self.q_grs = {g: instrument.angular_noise_crf(g) for g in self.grs_ids}
+        q_inv = {g: np.linalg.inv(self.q_grs[g]) for g in self.grs_ids}
+        self.q_fused = np.linalg.inv(sum(q_inv.values()))
+        self.weights = {g: self.q_fused @ q_inv[g] for g in self.grs_ids}
+        st_var = instrument.noise.star_tracker_variance()
+        whiten = np.diag(1.0 / np.sqrt(st_var))
+        values, vectors = np.linalg.eigh(whiten @ self.q_fused @ whiten.T)
+        self.to_model = vectors.T @ whiten  # M = U^T T
+        self.from_model = np.linalg.inv(self.to_model)
+        dt = self.dt
+        eye = np.eye(3)
+        self.f = np.block([[eye, dt * eye], [np.zeros((3, 3)), eye]])
+        self.b = np.vstack((0.5 * dt * dt * eye, dt * eye))
+        self.h = np.hstack((eye, np.zeros((3, 3))))
+        self.state_space = StateSpaceModel(
+            f=self.f, b=self.b, q=self.b @ np.diag(values) @ self.b.T, h=self.h, r=np.eye(3),
+            blocks=((0, 3), (1, 4), (2, 5)))
+        self.n_params = 3 * len(self.grs_ids)
+        # GRS1 - GRS2 consistency: residual covariance and the corrected-least-squares term
+        if len(self.grs_ids) == 2:
+            g1, g2 = self.grs_ids
+            self.w_diff = np.linalg.inv(self.q_grs[g1] + self.q_grs[g2])
+            self.w_diff = 0.5 * (self.w_diff + self.w_diff.T)
+            # W = L L^T: a weighted sum of squares sum_k D_k^T W D_k becomes one Gram product (L^T D)^T (L^T D)
+            self.w_diff_chol = np.linalg.cholesky(self.w_diff)
+            var = instrument.noise.angular_readout_variance()
+            correction = np.zeros(6)
+            for block, g in enumerate(self.grs_ids):
+                projected = self.c[g] @ self.w_diff @ self.c[g].T
+                correction[3 * block:3 * block + 3] = var / instrument.nominal_scale_factors[g] ** 2 \
+                    * np.diag(projected)
+            self.cls_correction = np.diag(correction)
+        else:
+            self.w_diff = None
+            self.w_diff_chol = None
+            self.cls_correction = None
+
+    def regressor_noise_correction(self, gramian: np.ndarray) -> dict[tuple[int, ...], np.ndarray]:
+        """Per-step bias of the star-tracker information from the readout noise in the input.
+
+        The input regressor holds the GRS readout noise n (``U = U_0 + N``) and the process noise is
+        ``w = -N G``: the sensitivities and the innovations share it, and ``E[sum S^T Lambda^-1 S]``
+        exceeds the noise-free information by, per step and per column c (G component of GRS i,
+        axis a, input direction ``v_c = M W_i C_i^T e_a``)::
+
+            K_cc = sigma_ia^2 / G_ia^2  (B v_c)^T X (B v_c),
+
+        X the innovation Gramian (:meth:`TwoStageFilter.innovation_gramian`). Subtracting it
+        (corrected least squares) removes the attenuation bias of G.
+
+        Returns
+        -------
+        dict
+            GRS present at a step (tuple of ids) to the (p,) diagonal of K.
+        """
+        var = self.instrument.noise.angular_readout_variance()
+        out: dict[tuple[int, ...], np.ndarray] = {}
+        configurations = [self.grs_ids] + ([(g,) for g in self.grs_ids] if len(self.grs_ids) == 2 else [])
+        for present in configurations:
+            weights = self.weights if len(present) == len(self.grs_ids) else {present[0]: np.eye(3)}
+            diag = np.zeros(self.n_params)
+            for block, g in enumerate(self.grs_ids):
+                if g not in present:
+                    continue
+                directions = self.b @ (self.to_model @ weights[g] @ self.c[g].T)  # (6, 3)
+                energy = np.einsum("ia,ij,ja->a", directions, gramian, directions)
+                diag[3 * block:3 * block + 3] = var / self.instrument.nominal_scale_factors[g] ** 2 * energy
+            out[tuple(present)] = diag
+        return out
+
+    def input_noise(self, present: Sequence[int]) -> np.ndarray:
+        """(3, 3) model-coordinate covariance of the readout noise in the angular acceleration of a step
+        with the GRS ``present`` (not empty; fused when all are present) [model units]."""
+        q_crf = self.q_fused if len(present) == len(self.grs_ids) else self.q_grs[present[0]]
+        return self.to_model @ q_crf @ self.to_model.T
+
+    def process_noise_model(self, present: Sequence[int], gap_sigma: float) -> np.ndarray:
+        """(6, 6) model-coordinate process noise of a step with only the GRS ``present``."""
+        if len(present) == len(self.grs_ids):
+            return self.state_space.q
+        if present:
+            q_crf = self.q_grs[present[0]]
+        else:
+            q_crf = gap_sigma**2 * np.eye(3)
+        q_model = self.to_model @ q_crf @ self.to_model.T
+        return self.b @ q_model @ self.b.T
+
+    def input_regressor(self, differences: Mapping[int, np.ndarray], present: Sequence[int]) -> np.ndarray:
+        """(3, 3 n_grs) model-coordinate d(acceleration)/dG of one step.
+
+        ``differences[g]`` is U~ of GRS g (3,) [V]; only the GRS in ``present`` contribute
+        (fused with their information weights).
+        """
+        out = np.zeros((3, self.n_params))
+        if not present:
+            return out
+        if len(present) == len(self.grs_ids):
+            weights = self.weights
+        else:
+            weights = {present[0]: np.eye(3)}
+        for block, g in enumerate(self.grs_ids):
+            if g in present:
+                out[:, 3 * block:3 * block + 3] = self.to_model @ weights[g] @ self.c[g].T * differences[g][None, :]
+        return out
+
+    def fused_input_matrix(self, grs: int) -> np.ndarray:
+        """(3, 3) ``M_g = T W_g C_g^T``: GRS g's U~ (times G) to the fused model-coordinate acceleration
+        when every GRS is present (the regular steps of the bulk paths)."""
+        return self.to_model @ self.weights[grs] @ self.c[grs].T
+
+    def input_regressor_factors(self, differences: np.ndarray) -> RegressorFactors:
+        """(L, 3, 3 n_grs) regressors of regular steps (all GRS present, :meth:`input_regressor` of each)
+        as factors: the series are U~ (L, 3 n_grs) of differences (L, n_grs, 3), the patterns
+        ``M_g[:, c] e_j^T`` (:meth:`fused_input_matrix`, j = 3 block + c)."""
+        n_series = 3 * len(self.grs_ids)
+        patterns = np.zeros((n_series, 3, self.n_params))
+        for block, grs in enumerate(self.grs_ids):
+            matrix = self.fused_input_matrix(grs)
+            for c in range(3):
+                patterns[3 * block + c, :, 3 * block + c] = matrix[:, c]
+        return RegressorFactors(differences.reshape(differences.shape[0], n_series), patterns)
+
+    def input_batch(self, differences: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """(L, 3) known inputs ``U_k g`` of regular steps (:meth:`input_regressor_factors` times ``g``,
+        without forming the regressors), differences (L, n_grs, 3)."""
+        out = np.zeros((differences.shape[0], 3))
+        for block, grs in enumerate(self.grs_ids):
+            out += (differences[:, block, :] * g[3 * block:3 * block + 3]) @ self.fused_input_matrix(grs).T
+        return out
+
+    def difference_row(self, differences_1: np.ndarray, differences_2: np.ndarray) -> np.ndarray:
+        """(3, 6) ``D`` of one epoch (see :meth:`difference_regressor`)."""
+        g1, g2 = self.grs_ids
+        return np.hstack((self.c[g1].T * differences_1[None, :], -self.c[g2].T * differences_2[None, :]))
+
+    def difference_residual(self, differences: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """(..., 3) ``D g`` (:meth:`difference_regressor` times ``g``, without forming ``D``)."""
+        g1, g2 = self.grs_ids
+        return (differences[..., 0, :] * g[0:3]) @ self.c[g1] - (differences[..., 1, :] * g[3:6]) @ self.c[g2]
+
+    def difference_regressor(self, differences: np.ndarray) -> np.ndarray:
+        """(..., 3, 6) ``D = [C_1^T diag(u_1), -C_2^T diag(u_2)]`` (CRF), differences (..., 2, 3)."""
+        g1, g2 = self.grs_ids
+        out = np.empty((*differences.shape[:-2], 3, 6))
+        out[..., :, 0:3] = self.c[g1].T * differences[..., 0, None, :]
+        out[..., :, 3:6] = -self.c[g2].T * differences[..., 1, None, :]
+        return out

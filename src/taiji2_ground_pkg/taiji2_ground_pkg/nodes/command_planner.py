@@ -1,0 +1,132 @@
+"""command_planner (ground): the maneuver as time-tagged command tables (ECSS PUS TC[11,4]) uplinked in passes.
+
+Turns the maneuver (a layout's square wave or a ``maneuver_file`` of ``taiji2 design``; ``start_s`` and
+``duration_s`` as maneuver_commander) into activities on the command grid (one per torque change,
+:func:`taiji2_sim_pkg.core.time_schedule.maneuver_activities`), assigns them to passes of the link
+model's contact schedule within the onboard schedule's capacity
+(:func:`~taiji2_sim_pkg.core.time_schedule.plan_uplinks`; a maneuver that cannot be carried ends the
+node with one line naming why), encodes each table as TC[11,4] packets of at most 50 activities and
+hands them to the link (``/ground/link/tc``), each stamped with the ground time from which it may be
+sent (its pass's start); the plan is latched on ``/ground/commanding/plan`` (JSON). It then follows the
+onboard verification reports the ground receives (``/ground/link/reception``): a table without an
+acceptance report once a later table's report or the end of the data has come is named "command table
+lost on uplink" on ``/diagnostics``. Parameters: ``config/command_planner.yaml``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from typing import Any
+
+from taiji2_model.config import load_config
+from taiji2_model.maneuver import SquareWaveManeuver
+from taiji2_model.maneuver_families import load_maneuver_file
+from taiji2_runtime import link_topics as lt
+from taiji2_runtime.entry import run_node
+from taiji2_runtime.node_parameters import read_only
+from taiji2_runtime.packets.scheduling import MAX_ACTIVITIES_PER_TC, Activity, encode_insert_activities
+from taiji2_runtime.ros import messages, rclpy
+from taiji2_sim_pkg.core.link import load_link_model
+from taiji2_sim_pkg.core.time_schedule import maneuver_activities, plan_uplinks
+
+_NS = 1_000_000_000
+PLAN_TOPIC = "/ground/commanding/plan"
+
+
+
+class CommandPlanner(rclpy.node.Node):
+    """The ground's command planner (module docstring)."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("command_planner", **node_kwargs)
+        dp = self.declare_parameter
+        preset = dp("preset", "type1", read_only("layout whose square wave is flown (type1 | type2)")).value
+        maneuver_file = dp("maneuver_file", "", read_only("maneuver file instead of the preset")).value
+        start_s = dp("start_s", -1.0, read_only("maneuver start [s] (-1: the preset's or the file's)")).value
+        duration_s = dp("duration_s", -1.0, read_only("maneuver duration [s] (-1: the preset's or file's)")).value
+        dt_s = 1.0 / dp("command_rate_hz", 10.0, read_only("command grid rate [Hz]")).value
+        self.model = load_link_model(dp("link_model", "ideal", read_only(
+            "the link model whose passes, light time and onboard schedule the plan follows")).value)
+        if maneuver_file:
+            maneuver = load_maneuver_file(maneuver_file)
+        else:
+            m = load_config(preset).maneuver
+            maneuver = SquareWaveManeuver(m.period_s, m.amplitude_n_m, m.phase_s, m.start_s, m.duration_s)
+        if start_s >= 0:
+            maneuver.start_s = float(start_s)
+        if duration_s >= 0:
+            maneuver.duration_s = float(duration_s)
+        activities = maneuver_activities(maneuver.torque_at, maneuver.start_s,
+                                         maneuver.start_s + maneuver.duration_s + dt_s, dt_s)
+        tables = plan_uplinks(activities, self.model)  # PlanError (a ValueError) names why it cannot be carried
+        self._packets: list[bytes] = []
+        self._ready_ns: list[int] = []
+        self.plan: list[dict[str, Any]] = []
+        seq = request = 0
+        for table in tables:
+            for j in range(0, len(table.activities), MAX_ACTIVITIES_PER_TC):
+                part = table.activities[j:j + MAX_ACTIVITIES_PER_TC]
+                self._packets.append(encode_insert_activities(seq, [Activity(round(r * _NS), t) for r, t in part],
+                                                              request))
+                self._ready_ns.append(round(table.ready_s * _NS))
+                self.plan.append({"tc_seq": seq, "pass": table.contact, "ready_s": table.ready_s,
+                                  "activities": len(part), "first_release_s": part[0][0],
+                                  "last_release_s": part[-1][0]})
+                seq += 1
+                request += len(part)
+        self._accepted: set[int] = set()
+        self._refused: dict[int, int] = {}
+        self._lost: list[int] = []
+        qos = lt.reliable_all()
+        self._tc_pub = self.create_publisher(messages.taiji2_msgs.SpacePackets, lt.GROUND_TC, qos)
+        self._plan_pub = self.create_publisher(messages.std_msgs.String, PLAN_TOPIC, lt.latched())
+        self._plan_pub.publish(messages.std_msgs.String(data=json.dumps(self.plan)))
+        self._diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(messages.std_msgs.String, lt.RECEPTION_TOPIC, self._on_reception, qos)
+        steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
+        self._send_timer = self.create_timer(0.05, self._send, clock=steady)
+        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
+        self.get_logger().info(f"{len(activities)} activities in {len(tables)} table(s), {len(self._packets)} "
+                               f"TC[11,4] packet(s), passes {[t.contact for t in tables]}")
+
+    def _send(self) -> None:
+        if self._tc_pub.get_subscription_count() == 0:
+            return  # the link is not there yet
+        self._tc_pub.publish(lt.burst(self._packets, self._ready_ns, lt.END_NS, end_of_data=True))
+        self._send_timer.cancel()
+
+    def _on_reception(self, msg: Any) -> None:
+        state = json.loads(msg.data)
+        for r in state.get("command_reports", []):
+            if r["subtype"] == 1:
+                self._accepted.add(r["tc_seq"])
+            elif r["subtype"] == 8:
+                self._refused[r["tc_seq"]] = r["refused"]
+        last = max(self._accepted, default=-1)
+        self._lost = [p["tc_seq"] for p in self.plan if p["tc_seq"] not in self._accepted
+                      and (p["tc_seq"] < last or state.get("end_of_data"))]
+
+    def _publish_diagnostics(self) -> None:
+        d = messages.diagnostic_msgs
+        problems = []
+        if self._lost:
+            problems.append(f"command table lost on uplink: TC[11,4] #{', #'.join(map(str, self._lost))} "
+                            "never acknowledged")
+        if self._refused:
+            problems.append(f"activities refused onboard: {sum(self._refused.values())} (late or over capacity)")
+        status = d.DiagnosticStatus(name="command_planner", hardware_id="taiji2_ground",
+                                    message="; ".join(problems) or "nominal")
+        status.level = d.DiagnosticStatus.WARN if problems else d.DiagnosticStatus.OK
+        values = {"tables": len(self.plan), "acknowledged": len(self._accepted), "lost_on_uplink": self._lost,
+                  "refused_activities": sum(self._refused.values())}
+        status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in values.items()]
+        self._diag_pub.publish(d.DiagnosticArray(status=[status]))
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(CommandPlanner, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
