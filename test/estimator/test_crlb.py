@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from taiji2_estimator_pkg.core.crlb import crlb, crlb_for_layout, noise_free_signals, whittle_scale_factor_information
+from taiji2_apps.layout_bound import crlb_for_layout, noise_free_signals
+from taiji2_estimator_pkg.core.crlb import crlb, whittle_scale_factor_information
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 
 pytest.importorskip("taiji2_sim_pkg.core.simulator")

@@ -20,7 +20,7 @@ import pytest
 from scipy.stats import chi2
 from scipy.stats import t as student_t
 
-from taiji2_estimator_pkg.core.crlb import crlb_for_layout
+from taiji2_apps.layout_bound import crlb_for_layout
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.pipeline import calibrate
 

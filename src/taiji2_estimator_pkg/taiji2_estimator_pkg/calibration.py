@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimate
+from taiji2_estimator_pkg.core.com_offset.estimate import ComOffsetEstimate
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.pipeline import calibrate as pipeline_calibrate
 from taiji2_estimator_pkg.report import EstimateTable, GrsResult

@@ -17,10 +17,10 @@ import math
 import numpy as np
 
 from taiji2_estimator_pkg.calibration import GRS_IDS, AlignedRecord
-from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimator
+from taiji2_estimator_pkg.core.com_offset.gls import ComOffsetEstimator
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.parameters import DEFAULTS, com_offset_options, scale_factor_options
-from taiji2_estimator_pkg.core.scale_factor import ScaleFactorEstimator
+from taiji2_estimator_pkg.core.scale_factor.gls import ScaleFactorEstimator
 from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
 
 SCALE_FACTOR_NAMES = ("G_Pphi", "G_Ptheta", "G_Ppsi")

@@ -122,7 +122,7 @@ def _rows(case: Mapping[str, Any]) -> list[dict[str, Any]]:
 
 @lru_cache(maxsize=16)
 def _crlb_cached(cfg_hash: str, config_json: str) -> tuple[float, ...]:
-    from taiji2_estimator_pkg.core.crlb import crlb_for_layout
+    from taiji2_apps.layout_bound import crlb_for_layout
 
     bound = crlb_for_layout(json.loads(config_json))
     return tuple(np.concatenate([bound.scale_factor_sigma, bound.com_offset_sigma, bound.difference_sigma()]))

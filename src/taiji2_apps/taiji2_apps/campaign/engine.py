@@ -20,6 +20,7 @@ from typing import Any, TextIO
 from taiji2_apps.campaign.case import run_case
 from taiji2_apps.campaign.spec import expand_cases
 from taiji2_apps.campaign.store import done_case_hashes, provenance, write_chunk
+from taiji2_apps.campaign.worker import TICK_INTERVAL_S
 
 #: Environment each nanny of the embedded cluster sets before it spawns its worker process (Dask's
 #: ``distributed.nanny.pre-spawn-environ``; None removes a variable from Dask's defaults). One BLAS
@@ -28,12 +29,6 @@ from taiji2_apps.campaign.store import done_case_hashes, provenance, write_chunk
 #: mmap, and a case costs 2.4-2.5x its time in a plain process (see :mod:`.worker`).
 WORKER_PRE_SPAWN_ENV: dict[str, str | None] = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
                                                "MKL_NUM_THREADS": "1", "MALLOC_TRIM_THRESHOLD_": None}
-#: The period of the event loop's health tick in a campaign worker [s] (Dask's default 20 ms,
-#: ``distributed.admin.tick.interval``): 50 wake-ups a second, each taking the GIL from the case's
-#: thread; with every core busy (2 workers on 2 cores) a warm case cost 1.09-1.16x the plain pool's
-#: with it and 0.97x at 1 s (bench_campaign, 16 cases each, 2026-11-26). The tick only watches the
-#: loop (a warning when a tick is more than ``distributed.admin.tick.limit``, 3 s, late).
-TICK_INTERVAL_S = 1.0
 #: Dask configuration of the embedded cluster's workers: no sampling profiler and a slow health
 #: tick, since each wake-up of a worker's event loop takes the GIL from its case (10-17 % and 9-16 %
 #: of a case; :func:`.worker.quiet_event_loop`, which does the same on an existing cluster).

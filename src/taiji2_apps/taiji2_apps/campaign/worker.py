@@ -24,7 +24,13 @@ from typing import Any
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from taiji2_apps.campaign.engine import TICK_INTERVAL_S
+#: The period of the event loop's health tick in a campaign worker [s] (Dask's default 20 ms,
+#: ``distributed.admin.tick.interval``): 50 wake-ups a second, each taking the GIL from the case's
+#: thread; with every core busy (2 workers on 2 cores) a warm case cost 1.09-1.16x the plain pool's
+#: with it and 0.97x at 1 s (bench_campaign, 16 cases each, 2026-11-26). The tick only watches the
+#: loop (a warning when a tick is more than ``distributed.admin.tick.limit``, 3 s, late).
+TICK_INTERVAL_S = 1.0
+
 
 #: glibc's mallopt parameters.
 M_TRIM_THRESHOLD = -1

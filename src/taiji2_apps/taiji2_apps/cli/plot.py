@@ -34,7 +34,7 @@ def main(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from taiji2_estimator_pkg import plots
+    from taiji2_apps import plots
     from taiji2_estimator_pkg.core.instrument import InstrumentModel
     from taiji2_model.config import load_config
     from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch

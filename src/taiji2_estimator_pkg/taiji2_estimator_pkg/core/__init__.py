@@ -15,24 +15,18 @@ Modules:
 - :mod:`.pipeline`: offline calibration of a whole record
 """
 
-from taiji2_estimator_pkg.core.com_offset import (
-    ComOffsetEstimate,
-    ComOffsetEstimator,
-    ComOffsetOptions,
-    PaperComOffsetFilter,
-    PaperComOffsetOptions,
-)
-from taiji2_estimator_pkg.core.crlb import CrlbResult, crlb, crlb_for_layout
+from taiji2_estimator_pkg.core.com_offset.estimate import ComOffsetEstimate
+from taiji2_estimator_pkg.core.com_offset.gls import ComOffsetEstimator
+from taiji2_estimator_pkg.core.com_offset.model import ComOffsetOptions
+from taiji2_estimator_pkg.core.com_offset.paper import PaperComOffsetFilter, PaperComOffsetOptions
+from taiji2_estimator_pkg.core.crlb import CrlbResult, crlb
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.noise_model import NoiseBudget
 from taiji2_estimator_pkg.core.pipeline import CalibrationResult, calibrate
-from taiji2_estimator_pkg.core.scale_factor import (
-    PaperScaleFactorFilter,
-    PaperScaleFactorOptions,
-    ScaleFactorEstimate,
-    ScaleFactorEstimator,
-    ScaleFactorOptions,
-)
+from taiji2_estimator_pkg.core.scale_factor.estimate import ScaleFactorEstimate
+from taiji2_estimator_pkg.core.scale_factor.gls import ScaleFactorEstimator
+from taiji2_estimator_pkg.core.scale_factor.model import ScaleFactorOptions
+from taiji2_estimator_pkg.core.scale_factor.paper import PaperScaleFactorFilter, PaperScaleFactorOptions
 from taiji2_estimator_pkg.core.validation import InputValidator, ValidationOptions
 
 __all__ = [
@@ -54,5 +48,4 @@ __all__ = [
     "ValidationOptions",
     "calibrate",
     "crlb",
-    "crlb_for_layout",
 ]

@@ -42,18 +42,18 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimator, ComOffsetOptions, cross_matrix
+from taiji2_estimator_pkg.core.com_offset.gls import ComOffsetEstimator
 from taiji2_estimator_pkg.core.com_offset.joint import joint_information
+from taiji2_estimator_pkg.core.com_offset.model import ComOffsetOptions, cross_matrix
 from taiji2_estimator_pkg.core.instrument import InstrumentModel, linear_scale_factors
-from taiji2_estimator_pkg.core.scale_factor import ScaleFactorEstimator, ScaleFactorOptions
+from taiji2_estimator_pkg.core.scale_factor.gls import ScaleFactorEstimator
+from taiji2_estimator_pkg.core.scale_factor.model import ScaleFactorOptions
 from taiji2_estimator_pkg.core.twostage import solve_information
 from taiji2_estimator_pkg.core.validation import ValidationOptions
 
 __all__ = [
     "CrlbResult",
     "crlb",
-    "crlb_for_layout",
-    "noise_free_signals",
     "noise_free_voltages",
     "whittle_scale_factor_information",
 ]
@@ -258,71 +258,6 @@ def crlb(instrument: InstrumentModel, t_s: ArrayLike, omega_dot: ArrayLike, omeg
     cov_joint = 0.5 * (cov_joint + cov_joint.T)
     return CrlbResult(grs_ids, float(t[-1] - t[0] + (t[1] - t[0] if t.size > 1 else 0.0)), g_true, cov_g, d_true,
                       cov_d_given, cov_joint[p:p + n_d, p:p + n_d], jac, 0.5 * (cov_d + cov_d.T), cov_joint[:p, :p])
-
-
-def noise_free_signals(layout: Any, duration_s: float | None = None,
-                       overrides: Mapping[str, Any] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
-    """True angular acceleration and rate of a layout's maneuver (needs ``taiji2_sim_pkg``).
-
-    Every noise source is switched off; the thruster torque noise (real motion) too.
-
-    Parameters
-    ----------
-    layout : str, path, mapping or SimConfig
-        Simulator layout.
-    duration_s : float, optional
-        Maneuver duration [s] (default: the layout's).
-    overrides : mapping, optional
-        Further dotted-key overrides of the layout.
-
-    Returns
-    -------
-    t_s, omega_dot, omega : numpy.ndarray
-        (n,), (n, 3), (n, 3).
-    config : SimConfig
-        The configuration used (noise switched off).
-    """
-    from taiji2_model.config import NOISE_SOURCE_NAMES, load_config  # optional dependency
-    from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
-
-    source = layout.to_dict() if hasattr(layout, "to_dict") else layout
-    settings = dict(overrides or {})
-    if duration_s is not None:
-        settings["maneuver.duration_s"] = float(duration_s)
-    for name in NOISE_SOURCE_NAMES:
-        settings[f"noise.{name}.enabled"] = False
-    config = load_config(source, overrides=settings)
-    out = simulate_batch(config, 0, maneuver_torque_commands(config))
-    return out.t_s, out.truth.omega_dot_rad_s2, out.truth.omega_rad_s, config
-
-
-def crlb_for_layout(layout: Any, duration_s: float | None = None, grs_ids: Sequence[int] = (1, 2),
-                    overrides: Mapping[str, Any] | None = None, detrend: str = "linear") -> CrlbResult:
-    """Bounds for a simulator layout (maneuver, geometry, noise budget, true G and d of the layout).
-
-    Parameters
-    ----------
-    layout : str, path, mapping or SimConfig
-        Layout, e.g. ``"type1"``.
-    duration_s : float, optional
-        Experiment length [s].
-    grs_ids : sequence of int
-        GRS.
-    overrides : mapping, optional
-        Dotted-key overrides (e.g. ``{"noise.thruster_force.enabled": False}``); they apply to the
-        noise budget of the bound, while the signals are always noise-free.
-    detrend : str
-        Nuisance model of d.
-    """
-    from taiji2_model.config import load_config  # optional dependency
-
-    source = layout.to_dict() if hasattr(layout, "to_dict") else layout
-    config = load_config(source, overrides=dict(overrides or {}))
-    instrument = InstrumentModel.from_layout(config)
-    t, wd, w, _ = noise_free_signals(config, duration_s)
-    sensors = {s.grs_id: s for s in config.grs.sensors}
-    return crlb(instrument, t, wd, w, grs_ids, {g: sensors[g].angular_scale_factors for g in grs_ids},
-                {g: sensors[g].com_offset_m for g in grs_ids}, detrend)
 
 
 def whittle_scale_factor_information(instrument: InstrumentModel, omega_dot: ArrayLike, grs_id: int,

@@ -14,8 +14,10 @@ from typing import Any
 
 import yaml
 
-from taiji2_estimator_pkg.core.com_offset import ComOffsetOptions, PaperComOffsetOptions
-from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorOptions, ScaleFactorOptions
+from taiji2_estimator_pkg.core.com_offset.model import ComOffsetOptions
+from taiji2_estimator_pkg.core.com_offset.paper import PaperComOffsetOptions
+from taiji2_estimator_pkg.core.scale_factor.model import ScaleFactorOptions
+from taiji2_estimator_pkg.core.scale_factor.paper import PaperScaleFactorOptions
 from taiji2_estimator_pkg.core.validation import ValidationOptions
 
 __all__ = [

@@ -14,22 +14,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from taiji2_estimator_pkg.core.com_offset import (
-    ComOffsetEstimate,
-    ComOffsetEstimator,
-    ComOffsetOptions,
-    PaperComOffsetFilter,
-    PaperComOffsetOptions,
-)
+from taiji2_estimator_pkg.core.com_offset.estimate import ComOffsetEstimate
+from taiji2_estimator_pkg.core.com_offset.gls import ComOffsetEstimator
+from taiji2_estimator_pkg.core.com_offset.model import ComOffsetOptions
+from taiji2_estimator_pkg.core.com_offset.paper import PaperComOffsetFilter, PaperComOffsetOptions
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.parameters import NODE_DEFAULTS
-from taiji2_estimator_pkg.core.scale_factor import (
-    PaperScaleFactorFilter,
-    PaperScaleFactorOptions,
-    ScaleFactorEstimate,
-    ScaleFactorEstimator,
-    ScaleFactorOptions,
-)
+from taiji2_estimator_pkg.core.scale_factor.estimate import ScaleFactorEstimate
+from taiji2_estimator_pkg.core.scale_factor.gls import ScaleFactorEstimator
+from taiji2_estimator_pkg.core.scale_factor.model import ScaleFactorOptions
+from taiji2_estimator_pkg.core.scale_factor.paper import PaperScaleFactorFilter, PaperScaleFactorOptions
 
 __all__ = ["CalibrationResult", "calibrate"]
 

@@ -18,7 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimate, ComOffsetEstimator, PaperComOffsetFilter
+from taiji2_estimator_pkg.core.com_offset.estimate import ComOffsetEstimate
+from taiji2_estimator_pkg.core.com_offset.gls import ComOffsetEstimator
+from taiji2_estimator_pkg.core.com_offset.paper import PaperComOffsetFilter
 from taiji2_estimator_pkg.core.parameters import com_offset_options, paper_com_offset_options
 from taiji2_estimator_pkg.nodes import common
 from taiji2_estimator_pkg.scale_factor_wait import ScaleFactorHistory, ScaleFactorWait

@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from taiji2_estimator_pkg.core.parameters import paper_scale_factor_options, scale_factor_options
-from taiji2_estimator_pkg.core.scale_factor import PaperScaleFactorFilter, ScaleFactorEstimator
+from taiji2_estimator_pkg.core.scale_factor.gls import ScaleFactorEstimator
+from taiji2_estimator_pkg.core.scale_factor.paper import PaperScaleFactorFilter
 from taiji2_estimator_pkg.nodes import common
 from taiji2_runtime.batched import create_batched_subscription
 from taiji2_runtime.entry import run_node

@@ -28,17 +28,17 @@ Two methods:
     (one per component of G) and accumulates their full cross-product: d(G) and dd/dG are then
     exact for any G, which lets a node follow a running G estimate and still agree with the bulk
     result. By default d is then estimated jointly with G from every channel
-    (:mod:`.joint_com_offset`, the full Cramer-Rao bound); ``joint: false`` gives the two-stage
+    (:mod:`.joint`, the full Cramer-Rao bound); ``joint: false`` gives the two-stage
     ``d(G^)`` with ``P_d = P_d|G + J P_G J^T``.
 
 One method per file, imports one way (model <- estimator; joint and noise level are leaves):
 
-- :mod:`.com_offset_estimate`: the result (:class:`ComOffsetEstimate`);
-- :mod:`.com_offset_model`: options, noise model, basis of series (:class:`ComOffsetModel`);
-- :mod:`.com_offset_gls`: the default estimator (:class:`ComOffsetEstimator`);
-- :mod:`.joint_com_offset`: the joint (G, d) equations, shared with the bound (:mod:`.crlb`);
-- :mod:`.noise_level`: the noise of the linear channels in the band that carries d;
-- :mod:`.com_offset_paper`: the paper's filter.
+- :mod:`.estimate`: the result (:class:`ComOffsetEstimate`);
+- :mod:`.model`: options, noise model, basis of series (:class:`ComOffsetModel`);
+- :mod:`.gls`: the default estimator (:class:`ComOffsetEstimator`);
+- :mod:`.joint`: the joint (G, d) equations, shared with the bound (:mod:`taiji2_estimator_pkg.core.crlb`);
+- :mod:`taiji2_estimator_pkg.core.noise_level`: the noise of the linear channels in the band that carries d;
+- :mod:`.paper`: the paper's filter.
 
 This module is the public entry point: it re-exports those classes.
 """

@@ -27,7 +27,7 @@ from taiji2_estimator_pkg.core.gate_span import GateSpan
 from taiji2_estimator_pkg.core.instrument import InstrumentModel, angular_differences, linear_sums
 from taiji2_estimator_pkg.core.kalman import chi2_gate
 from taiji2_estimator_pkg.core.noise_level import BLOCK_S, BandNoise, band_noise, r_adjustment
-from taiji2_estimator_pkg.core.scale_factor import ScaleFactorEstimate
+from taiji2_estimator_pkg.core.scale_factor.estimate import ScaleFactorEstimate
 from taiji2_estimator_pkg.core.twostage import TwoStageFilter, solve_information
 from taiji2_estimator_pkg.core.validation import InputValidator, ValidationOptions, validate_batch
 

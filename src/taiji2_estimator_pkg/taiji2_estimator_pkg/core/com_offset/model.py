@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 
 from taiji2_estimator_pkg.core.factored_steady import RegressorFactors
 from taiji2_estimator_pkg.core.instrument import LINEAR_FROM_ANGULAR, InstrumentModel
-from taiji2_estimator_pkg.core.scale_factor import ScaleFactorModel
+from taiji2_estimator_pkg.core.scale_factor.model import ScaleFactorModel
 from taiji2_estimator_pkg.core.twostage import StateSpaceModel
 from taiji2_estimator_pkg.core.validation import ValidationOptions
 

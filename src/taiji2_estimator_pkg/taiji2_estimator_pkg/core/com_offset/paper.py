@@ -21,7 +21,7 @@ from taiji2_estimator_pkg.core.com_offset.model import cross_matrix
 from taiji2_estimator_pkg.core.epoch_arrays import EpochArrays
 from taiji2_estimator_pkg.core.instrument import InstrumentModel, linear_scale_factors
 from taiji2_estimator_pkg.core.kalman import KalmanFilter
-from taiji2_estimator_pkg.core.scale_factor import ScaleFactorEstimate
+from taiji2_estimator_pkg.core.scale_factor.estimate import ScaleFactorEstimate
 from taiji2_estimator_pkg.core.validation import InputValidator, ValidationOptions, validate_batch
 
 

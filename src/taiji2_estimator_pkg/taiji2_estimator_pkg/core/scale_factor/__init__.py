@@ -16,7 +16,7 @@ Two methods:
     (fused over the GRS with the information weights ``W_i = Q_f Q_i^-1``), process noise = the
     GRS angular readout noise mapped to CRF (``Q_f``, per sample), measurement = the raw
     small-angle attitude phi from the star tracker, white R. G is constant and enters linearly:
-    the two-stage filter of :mod:`.twostage` gives the exact GLS estimate and covariance (= the
+    the two-stage filter of :mod:`taiji2_estimator_pkg.core.twostage` gives the exact GLS estimate and covariance (= the
     augmented Kalman filter with a diffuse prior on G and on the initial attitude and rate).
     With two GRS the readout difference ``B_1 G_1 - B_2 G_2 = e_1 - e_2`` (independent of the
     fused acceleration) adds a static regression on the six parameters; its regressor holds the
@@ -25,11 +25,11 @@ Two methods:
 
 One method per file, imports one way:
 
-- :mod:`.scale_factor_estimate`: the result (:class:`ScaleFactorEstimate`) and :class:`StepReport`;
-- :mod:`.scale_factor_model`: options and model (:class:`ScaleFactorModel`);
-- :mod:`.scale_factor_gls`: the default estimator (:class:`ScaleFactorEstimator`);
-- :mod:`.epoch_arrays`: a validated record as arrays per epoch (both bulk paths);
-- :mod:`.scale_factor_paper`: the paper's filter.
+- :mod:`.estimate`: the result (:class:`ScaleFactorEstimate`) and :class:`StepReport`;
+- :mod:`.model`: options and model (:class:`ScaleFactorModel`);
+- :mod:`.gls`: the default estimator (:class:`ScaleFactorEstimator`);
+- :mod:`taiji2_estimator_pkg.core.epoch_arrays`: a validated record as arrays per epoch (both bulk paths);
+- :mod:`.paper`: the paper's filter.
 
 This module is the public entry point: it re-exports those classes.
 """

@@ -21,9 +21,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from taiji2_apps.layout_bound import crlb_for_layout
 from taiji2_estimator_pkg.core.attitude import SmoothingDerivative, integrate_attitude
 from taiji2_estimator_pkg.core.com_offset import ComOffsetEstimator
-from taiji2_estimator_pkg.core.crlb import crlb_for_layout
 from taiji2_estimator_pkg.core.instrument import InstrumentModel, angular_differences
 from taiji2_estimator_pkg.core.scale_factor import ScaleFactorEstimator
 from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
