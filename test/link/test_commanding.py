@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from spacepackets.ecss.tc import PusTc
 
+from taiji2_ground_pkg.uplink_plan import PlanError, maneuver_activities, plan_uplinks
 from taiji2_model.maneuver import SquareWaveManeuver
 from taiji2_runtime.packets.scheduling import (
     FAILURE_LATE,
@@ -17,7 +18,7 @@ from taiji2_runtime.packets.scheduling import (
     encode_report,
 )
 from taiji2_sim_pkg.core.link import load_link_model
-from taiji2_sim_pkg.core.time_schedule import OnboardSchedule, PlanError, maneuver_activities, plan_uplinks
+from taiji2_sim_pkg.core.onboard_schedule import OnboardSchedule
 
 
 def test_insert_activities_and_reports_through_spacepackets():

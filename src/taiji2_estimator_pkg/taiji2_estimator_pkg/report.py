@@ -10,6 +10,14 @@ from typing import Any
 
 import numpy as np
 
+from taiji2_model.contract import (
+    COM_OFFSET_DIFFERENCE_TOPIC,
+    COM_OFFSET_ESTIMATE_TOPIC_OF,
+    SCALE_FACTOR_ESTIMATE_TOPIC_OF,
+    TRUE_COM_OFFSET_TOPIC_OF,
+    TRUE_SCALE_FACTOR_TOPIC_OF,
+)
+
 #: Taiji-2 requirements (paper): scale factors to 0.3 % (relative), c.m. offsets to 100 um.
 SCALE_FACTOR_REQUIREMENT_REL = 3e-3
 COM_OFFSET_REQUIREMENT_M = 100e-6
@@ -49,10 +57,10 @@ class EstimateTable:
         results = []
         method = ""
         for grs in (1, 2):
-            sf = latest[f"/taiji2/estimates/grs{grs}/scale_factors"]
-            d = latest[f"/taiji2/estimates/grs{grs}/com_offset"]
-            sf_truth = latest.get(f"/taiji2/sim/grs{grs}/scale_factors")
-            d_truth = latest.get(f"/taiji2/sim/grs{grs}/com_offset")
+            sf = latest[SCALE_FACTOR_ESTIMATE_TOPIC_OF[grs]]
+            d = latest[COM_OFFSET_ESTIMATE_TOPIC_OF[grs]]
+            sf_truth = latest.get(TRUE_SCALE_FACTOR_TOPIC_OF[grs])
+            d_truth = latest.get(TRUE_COM_OFFSET_TOPIC_OF[grs])
             method = sf.method
             results.append(GrsResult(
                 grs_id=grs,
@@ -65,7 +73,7 @@ class EstimateTable:
                     [d_truth.offset.x, d_truth.offset.y, d_truth.offset.z]),
                 samples_used=int(sf.samples_used), samples_rejected=int(sf.samples_rejected + d.samples_rejected),
                 nis_mean=float(sf.nis_mean)))
-        diff = latest.get("/taiji2/estimates/com_offset_difference")
+        diff = latest.get(COM_OFFSET_DIFFERENCE_TOPIC)
         table = cls(method=method, grs=results, extra={"layout": layout})
         if diff is not None:
             table.difference_m = np.array([diff.offset.x, diff.offset.y, diff.offset.z])

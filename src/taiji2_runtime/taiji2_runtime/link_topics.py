@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from taiji2_model.contract import RAW_TOPICS
 from taiji2_runtime.ros import messages, rclpy
 
 ONBOARD_NS = "/onboard"
@@ -24,8 +25,7 @@ GROUND_TM = "/ground/link/tm"  # telemetry packets the ground station received (
 GROUND_TC = "/ground/link/tc"  # telecommand packets the ground sends (planner -> link)
 RECEPTION_TOPIC = "/ground/link/reception"  # ground receiver: what has been released, when (JSON)
 LINK_REPORT_TOPIC = "/taiji2/sim/link_report"  # the link's own account (evaluation only, like /taiji2/sim/)
-CONTRACT_TOPICS = ("/taiji2/star_tracker", "/taiji2/grs1/voltages", "/taiji2/grs2/voltages",
-                   "/taiji2/maneuver/command")
+CONTRACT_TOPICS = tuple(RAW_TOPICS)
 _NS = 1_000_000_000
 END_NS = (2**31 - 1) * _NS  # "complete through the end of time" (the largest header stamp)
 

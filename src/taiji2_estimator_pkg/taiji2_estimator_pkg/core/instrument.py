@@ -27,6 +27,7 @@ import yaml
 from numpy.typing import ArrayLike
 
 from taiji2_estimator_pkg.core.noise_model import NoiseBudget, _get
+from taiji2_model.frames import crf_to_tmrf
 
 __all__ = [
     "InstrumentModel",
@@ -39,28 +40,6 @@ __all__ = [
 
 LINEAR_FROM_ANGULAR = (2, 0, 1)
 """Index of the angular scale factor behind each linear one: G_Px ~ G_Ppsi, G_Py ~ G_Pphi, G_Pz ~ G_Ptheta."""
-
-
-def crf_to_tmrf(grs_id: int, alpha_rad: float) -> np.ndarray:
-    """Rotation C_i (CRF components to TMRF_i components), paper's C_{m_i,C}.
-
-    Parameters
-    ----------
-    grs_id : int
-        1 or 2.
-    alpha_rad : float
-        Angle between the telescope lines of sight [rad].
-
-    Returns
-    -------
-    numpy.ndarray
-        (3, 3); ``C_2 = C_1^T``.
-    """
-    if grs_id not in (1, 2):
-        raise ValueError(f"grs_id must be 1 or 2, got {grs_id!r}")
-    c, s = math.cos(0.5 * alpha_rad), math.sin(0.5 * alpha_rad)
-    c_1 = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return c_1 if grs_id == 1 else c_1.T.copy()
 
 
 #: order of :func:`angular_differences` among the (vx, vy, vz) differences

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from taiji2_model.contract import COMMAND_TOPIC, GRS_TOPICS, STAR_TRACKER_TOPIC
+
 __all__ = ["write_simulated_bag"]
 
 _ST, _GRS, _CMD = "taiji2_msgs/msg/StarTracker", "taiji2_msgs/msg/GrsVoltages", "geometry_msgs/msg/WrenchStamped"
@@ -68,9 +70,9 @@ def write_simulated_bag(path: str | Path, t_s: np.ndarray, st_quat_xyzw: np.ndar
 
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     with Writer(path, version=8, storage_plugin=plugin) as writer:
-        st = writer.add_connection("/taiji2/star_tracker", _ST, typestore=store)
-        grs = [writer.add_connection(f"/taiji2/grs{i + 1}/voltages", _GRS, typestore=store) for i in range(2)]
-        cmd = writer.add_connection("/taiji2/maneuver/command", _CMD, typestore=store)
+        st = writer.add_connection(STAR_TRACKER_TOPIC, _ST, typestore=store)
+        grs = [writer.add_connection(GRS_TOPICS[i], _GRS, typestore=store) for i in range(2)]
+        cmd = writer.add_connection(COMMAND_TOPIC, _CMD, typestore=store)
         commands = sorted(zip(np.asarray(command_t_s, dtype=float), np.asarray(torque_cmd_n_m, dtype=float),
                               strict=True), key=lambda item: item[0])
         next_command = 0

@@ -24,6 +24,11 @@ from taiji2_estimator_pkg.core.com_offset.paper import PaperComOffsetFilter
 from taiji2_estimator_pkg.core.parameters import com_offset_options, paper_com_offset_options
 from taiji2_estimator_pkg.nodes import common
 from taiji2_estimator_pkg.scale_factor_wait import ScaleFactorHistory, ScaleFactorWait
+from taiji2_model.contract import (
+    COM_OFFSET_DIFFERENCE_TOPIC,
+    COM_OFFSET_ESTIMATE_TOPIC_OF,
+    SCALE_FACTOR_ESTIMATE_TOPIC_OF,
+)
 from taiji2_runtime.batched import create_batched_subscription
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages
@@ -69,15 +74,15 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
             # raw streams: up to 16 queued messages per callback (rclpy takes one per wait-set pass otherwise)
             create_batched_subscription(self, t.GrsVoltages, common.GRS_TOPICS[gid],
                                         lambda m, g=gid: self._on_grs(m, g), qos)
-            self.create_subscription(t.ScaleFactorEstimate, f"/taiji2/estimates/grs{gid}/scale_factors",
+            self.create_subscription(t.ScaleFactorEstimate, SCALE_FACTOR_ESTIMATE_TOPIC_OF[gid],
                                      self._on_scale_factors, common.estimate_subscription_qos())
         if self.paper:
             create_batched_subscription(self, t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
         if self.use_rate:
             self.create_subscription(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, self._on_rate, qos)
-        self.pubs = {g: self.create_publisher(t.ComOffsetEstimate, f"/taiji2/estimates/grs{g}/com_offset",
+        self.pubs = {g: self.create_publisher(t.ComOffsetEstimate, COM_OFFSET_ESTIMATE_TOPIC_OF[g],
                                               common.estimate_qos()) for g in GRS_IDS}
-        self.diff_pub = self.create_publisher(t.ComOffsetEstimate, "/taiji2/estimates/com_offset_difference",
+        self.diff_pub = self.create_publisher(t.ComOffsetEstimate, COM_OFFSET_DIFFERENCE_TOPIC,
                                               common.estimate_qos())
         self.get_logger().info(f"method {self.p['method']}, nominal model {self.p['layout']}")
 

@@ -20,6 +20,7 @@ from taiji2_estimator_pkg.core.parameters import paper_scale_factor_options, sca
 from taiji2_estimator_pkg.core.scale_factor.gls import ScaleFactorEstimator
 from taiji2_estimator_pkg.core.scale_factor.paper import PaperScaleFactorFilter
 from taiji2_estimator_pkg.nodes import common
+from taiji2_model.contract import SCALE_FACTOR_ESTIMATE_TOPIC_OF
 from taiji2_runtime.batched import create_batched_subscription
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages
@@ -53,7 +54,7 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
             create_batched_subscription(self, t.GrsVoltages, common.GRS_TOPICS[gid],
                                         lambda m, g=gid: self._on_grs(m, g), qos)
         self.estimate_pubs = {g: self.create_publisher(t.ScaleFactorEstimate,
-                                                       f"/taiji2/estimates/grs{g}/scale_factors",
+                                                       SCALE_FACTOR_ESTIMATE_TOPIC_OF[g],
                                                        common.estimate_qos())
                               for g in GRS_IDS}
         self.rate_pub = self.create_publisher(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, qos)

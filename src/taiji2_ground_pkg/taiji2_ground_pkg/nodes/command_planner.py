@@ -2,9 +2,9 @@
 
 Turns the maneuver (a layout's square wave or a ``maneuver_file`` of ``taiji2 design``; ``start_s`` and
 ``duration_s`` as maneuver_commander) into activities on the command grid (one per torque change,
-:func:`taiji2_sim_pkg.core.time_schedule.maneuver_activities`), assigns them to passes of the link
+:func:`taiji2_ground_pkg.uplink_plan.maneuver_activities`), assigns them to passes of the link
 model's contact schedule within the onboard schedule's capacity
-(:func:`~taiji2_sim_pkg.core.time_schedule.plan_uplinks`; a maneuver that cannot be carried ends the
+(:func:`~taiji2_ground_pkg.uplink_plan.plan_uplinks`; a maneuver that cannot be carried ends the
 node with one line naming why), encodes each table as TC[11,4] packets of at most 50 activities and
 hands them to the link (``/ground/link/tc``), each stamped with the ground time from which it may be
 sent (its pass's start); the plan is latched on ``/ground/commanding/plan`` (JSON). It then follows the
@@ -19,6 +19,7 @@ import json
 from collections.abc import Sequence
 from typing import Any
 
+from taiji2_ground_pkg.uplink_plan import maneuver_activities, plan_uplinks
 from taiji2_model.config import load_config
 from taiji2_model.maneuver import SquareWaveManeuver
 from taiji2_model.maneuver_families import load_maneuver_file
@@ -28,7 +29,6 @@ from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.scheduling import MAX_ACTIVITIES_PER_TC, Activity, encode_insert_activities
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.link import load_link_model
-from taiji2_sim_pkg.core.time_schedule import maneuver_activities, plan_uplinks
 
 _NS = 1_000_000_000
 PLAN_TOPIC = "/ground/commanding/plan"

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from taiji2_model.contract import COMMAND_TOPIC, GRS_TOPICS, STAR_TRACKER_TOPIC
+
 __all__ = [
     "APIDS",
     "CRC_OCTETS",
@@ -105,11 +107,11 @@ class StreamDefinition:
 
 _COV = tuple(f"attitude_covariance[{i}]" for i in range(9))
 STREAMS: tuple[StreamDefinition, ...] = (
-    StreamDefinition("star_tracker", 0x101, "/taiji2/star_tracker",
+    StreamDefinition("star_tracker", 0x101, STAR_TRACKER_TOPIC,
                      ("attitude.x", "attitude.y", "attitude.z", "attitude.w", *_COV)),
-    StreamDefinition("grs1", 0x111, "/taiji2/grs1/voltages", ("vx1", "vx2", "vy1", "vy2", "vz1", "vz2")),
-    StreamDefinition("grs2", 0x112, "/taiji2/grs2/voltages", ("vx1", "vx2", "vy1", "vy2", "vz1", "vz2")),
-    StreamDefinition("executed_torque", 0x121, "/taiji2/maneuver/command",
+    StreamDefinition("grs1", 0x111, GRS_TOPICS[0], ("vx1", "vx2", "vy1", "vy2", "vz1", "vz2")),
+    StreamDefinition("grs2", 0x112, GRS_TOPICS[1], ("vx1", "vx2", "vy1", "vy2", "vz1", "vz2")),
+    StreamDefinition("executed_torque", 0x121, COMMAND_TOPIC,
                      ("wrench.torque.x", "wrench.torque.y", "wrench.torque.z",
                       "wrench.force.x", "wrench.force.y", "wrench.force.z")),
 )

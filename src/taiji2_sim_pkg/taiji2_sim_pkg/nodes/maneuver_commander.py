@@ -17,13 +17,13 @@ from typing import Any
 import numpy as np
 
 from taiji2_model.config import builtin_layouts, load_config
+from taiji2_model.contract import COMMAND_TOPIC
 from taiji2_model.maneuver import SquareWaveManeuver
 from taiji2_model.maneuver_families import check_thrust, load_maneuver_file, maneuver_spec
 from taiji2_runtime import node_parameters
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages, rclpy
 
-COMMAND_TOPIC = "/taiji2/maneuver/command"
 _NS = 1e-9
 
 

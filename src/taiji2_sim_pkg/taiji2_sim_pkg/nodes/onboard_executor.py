@@ -1,7 +1,7 @@
 """onboard_executor (onboard): the time-based schedule of ECSS PUS service 11 and the maneuver it flies.
 
 Takes the telecommands the uplink delivers (``/onboard/link/tc``; each packet with its onboard arrival
-time): each ``TC[11,4]`` inserts its activities into :class:`taiji2_sim_pkg.core.time_schedule.OnboardSchedule`
+time): each ``TC[11,4]`` inserts its activities into :class:`taiji2_sim_pkg.core.onboard_schedule.OnboardSchedule`
 at its arrival, which refuses an activity due before arrival + time margin (late: never executed late)
 or beyond the capacity; acceptance ``TM[1,1]`` and completion ``TM[1,7]`` / ``TM[1,8]`` (refused
 activities counted, code late or capacity) are reported in telemetry (``/onboard/link/tm_reports``,
@@ -19,13 +19,14 @@ import json
 from collections.abc import Sequence
 from typing import Any
 
+from taiji2_model.contract import COMMAND_TOPIC
 from taiji2_runtime import link_topics as lt
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.packetize import PacketError
 from taiji2_runtime.packets.scheduling import FAILURE_CAPACITY, FAILURE_LATE, decode_insert_activities, encode_report
 from taiji2_runtime.ros import messages, rclpy
-from taiji2_sim_pkg.core.time_schedule import OnboardSchedule
+from taiji2_sim_pkg.core.onboard_schedule import OnboardSchedule
 
 _NS = 1_000_000_000
 REPORTS_TOPIC = "/onboard/link/tm_reports"
@@ -55,7 +56,7 @@ class OnboardExecutor(rclpy.node.Node):
         qos = lt.reliable_all()
         t = messages.taiji2_msgs
         self._cmd_pub = self.create_publisher(messages.geometry_msgs.WrenchStamped,
-                                              lt.onboard("/taiji2/maneuver/command"), qos)
+                                              lt.onboard(COMMAND_TOPIC), qos)
         self._report_pub = self.create_publisher(t.SpacePackets, REPORTS_TOPIC, qos)
         self._diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(t.SpacePackets, lt.ONBOARD_TC, self._on_telecommands, qos)

@@ -27,15 +27,24 @@ import numpy as np
 import yaml
 
 from taiji2_model.config import load_config
+from taiji2_model.contract import (
+    APPLIED_WRENCH_TOPIC,
+    COMMAND_TOPIC,
+    GRS_TOPICS,
+    PROVENANCE_TOPIC,
+    STAR_TRACKER_TOPIC,
+    TRUE_ANGULAR_ACCELERATION_TOPIC,
+    TRUE_ANGULAR_RATE_TOPIC,
+    TRUE_ATTITUDE_TOPIC,
+    TRUE_COM_OFFSET_TOPIC_OF,
+    TRUE_SCALE_FACTOR_TOPIC_OF,
+)
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.command_gate import CommandGate, CommandSchedule
 from taiji2_sim_pkg.core.range_check import RangeMonitor
 from taiji2_sim_pkg.core.simulator import SimOutput, SimSample, Simulator
 
-COMMAND_TOPIC = "/taiji2/maneuver/command"
-STAR_TRACKER_TOPIC = "/taiji2/star_tracker"
-GRS_TOPICS = ("/taiji2/grs1/voltages", "/taiji2/grs2/voltages")
 TMRF_FRAMES = ("tmrf1", "tmrf2")
 CLOCK_MODES = ("realtime", "accelerated", "follow")
 _NS = 1_000_000_000
@@ -153,7 +162,7 @@ class SpacecraftSim(rclpy.node.Node):
                            if self._mode == "accelerated" else None)
         self._truth = _TruthPublishers(self, reliable_all, truth_kinematics) if self._publish_truth else None
         latched = rclpy.qos.QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
-        self._provenance_pub = self.create_publisher(m.std_msgs.String, "/taiji2/sim/provenance", latched)
+        self._provenance_pub = self.create_publisher(m.std_msgs.String, PROVENANCE_TOPIC, latched)
         self._provenance_pub.publish(m.std_msgs.String(data=json.dumps(self._sim.provenance())))
         self.create_subscription(m.geometry_msgs.WrenchStamped, COMMAND_TOPIC, self._on_command, reliable_all)
 
@@ -451,13 +460,13 @@ class _TruthPublishers:
         #: evaluation needs only G and d (experiment --link) turns it off
         self._kinematics = kinematics
         if kinematics:
-            self._rate = node.create_publisher(g.Vector3Stamped, "/taiji2/sim/angular_rate", qos)
-            self._accel = node.create_publisher(g.Vector3Stamped, "/taiji2/sim/angular_acceleration", qos)
-            self._attitude = node.create_publisher(g.QuaternionStamped, "/taiji2/sim/attitude", qos)
-            self._torque = node.create_publisher(g.WrenchStamped, "/taiji2/sim/applied_wrench", qos)
-        self._scale = [node.create_publisher(t.ScaleFactorEstimate, f"/taiji2/sim/grs{i}/scale_factors", qos)
+            self._rate = node.create_publisher(g.Vector3Stamped, TRUE_ANGULAR_RATE_TOPIC, qos)
+            self._accel = node.create_publisher(g.Vector3Stamped, TRUE_ANGULAR_ACCELERATION_TOPIC, qos)
+            self._attitude = node.create_publisher(g.QuaternionStamped, TRUE_ATTITUDE_TOPIC, qos)
+            self._torque = node.create_publisher(g.WrenchStamped, APPLIED_WRENCH_TOPIC, qos)
+        self._scale = [node.create_publisher(t.ScaleFactorEstimate, TRUE_SCALE_FACTOR_TOPIC_OF[i], qos)
                        for i in (1, 2)]
-        self._offset = [node.create_publisher(t.ComOffsetEstimate, f"/taiji2/sim/grs{i}/com_offset", qos)
+        self._offset = [node.create_publisher(t.ComOffsetEstimate, TRUE_COM_OFFSET_TOPIC_OF[i], qos)
                         for i in (1, 2)]
         self._mass_kg = None
 
