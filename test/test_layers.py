@@ -75,3 +75,15 @@ def test_layer_contracts_are_kept():
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
     assert "0 broken" in proc.stdout
+
+
+def test_no_module_imports_the_facade_of_its_own_package():
+    """A package's ``__init__`` re-exports for users outside it; inside, modules import the leaf modules
+    (a facade imported from inside its own package ties every module to every other)."""
+    import grimp
+
+    graph = grimp.build_graph(*PACKAGES)
+    packages = {m for m in graph.modules if graph.find_children(m)}
+    inside = sorted((m, t) for m in graph.modules for t in graph.find_modules_directly_imported_by(m)
+                    if t in packages and m.startswith(t + "."))
+    assert inside == [], inside

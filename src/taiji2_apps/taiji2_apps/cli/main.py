@@ -24,7 +24,7 @@ import sys
 from collections.abc import Sequence
 from types import ModuleType
 
-from taiji2_runtime.cli import plain_text
+from taiji2_runtime.cli.plain_text import plain_text
 
 #: this project's verbs: name -> module (imported when the verb runs)
 VERBS = {

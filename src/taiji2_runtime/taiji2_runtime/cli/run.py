@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, distribution
 
-from taiji2_runtime.cli import plain_text
+from taiji2_runtime.cli.plain_text import plain_text
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
