@@ -156,3 +156,24 @@ def test_an_interrupt_stops_every_node_and_what_they_started(tmp_path, how):
     except psutil.NoSuchProcess:
         alive = []
     assert alive == [], "a node's child outlived the run"
+
+
+def test_an_interrupt_while_a_node_starts_waits_until_the_node_is_among_those_to_stop(tmp_path, monkeypatch):
+    import taiji2_apps.runner.supervise as supervise
+
+    started = []
+
+    def start_then_interrupt(spec, log_dir):
+        running = supervise_start(spec, log_dir)  # the process exists, the runner does not know it yet
+        started.append(running.popen.pid)
+        os.kill(os.getpid(), signal.SIGINT)
+        return running
+
+    supervise_start = supervise.start
+    monkeypatch.setattr(supervise, "start", start_then_interrupt)
+    nodes = [_node("worker", UNTIL_STOPPED), _node("never_started", UNTIL_STOPPED)]
+    with pytest.raises(KeyboardInterrupt):
+        run_graph(Graph(nodes, tmp_path, done=lambda: False, progress=lambda: Progress(0.0, 5.0), timeout_s=600.0,
+                        stop_waits_s=(5.0, 5.0, 5.0)))
+    assert len(started) == 1 and not (tmp_path / "never_started.log").exists()
+    _no_children_left()

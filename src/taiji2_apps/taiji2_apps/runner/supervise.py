@@ -17,24 +17,43 @@ from taiji2_apps.runner.processes import Running, Stopped, failure_message, star
 _DRAIN_WAITS_S = (0.05,) * 5
 
 
-@contextlib.contextmanager
-def _interrupts_raise() -> Iterator[None]:
-    """While the run lasts, SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (so the nodes are
+class _Interrupts:
+    """While the run lasts, SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (so that the nodes are
     stopped in order, the recorder last); the handlers before (the DDS runtime's, which shut its context down)
-    are restored after the stop. Elsewhere than in the main thread, nothing changes."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
+    are restored after the stop. Within :meth:`held` (a node being started and recorded) the interrupt waits
+    until the node is on the list of those to stop. Elsewhere than in the main thread, nothing changes."""
 
-    def interrupt(signum: int, _frame: Any) -> None:
+    def __init__(self) -> None:
+        self._hold = False
+        self._pending: int | None = None
+
+    def _interrupt(self, signum: int, _frame: Any) -> None:
+        if self._hold:
+            self._pending = signum
+            return
         raise KeyboardInterrupt(signal.Signals(signum).name)
 
-    before = {s: signal.signal(s, interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for signum, handler in before.items():
-            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+    @contextlib.contextmanager
+    def installed(self) -> Iterator[None]:
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        before = {s: signal.signal(s, self._interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield
+        finally:
+            for signum, handler in before.items():
+                signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+
+    @contextlib.contextmanager
+    def held(self) -> Iterator[None]:
+        self._hold = True
+        try:
+            yield
+        finally:
+            self._hold = False
+        if self._pending is not None:
+            raise KeyboardInterrupt(signal.Signals(self._pending).name)
 
 
 def run_graph(graph: Graph) -> RunResult:
@@ -48,10 +67,12 @@ def run_graph(graph: Graph) -> RunResult:
     failure: str | None = None
     wall_s = 0.0
     stopped = Stopped()
-    with _interrupts_raise():
+    interrupts = _Interrupts()
+    with interrupts.installed():
         try:
             for spec in graph.nodes:
-                nodes.append(start(spec, graph.log_dir))
+                with interrupts.held():
+                    nodes.append(start(spec, graph.log_dir))
             failure = _supervise(graph, nodes, started)
             wall_s = time.monotonic() - started
         finally:
