@@ -392,7 +392,7 @@ def _report(args: argparse.Namespace, model: Any, link_seed: int, monitor: LinkM
     """Print the final estimates and the link report, write results.json."""
     from taiji2_estimator_pkg.report import EstimateTable, format_table
 
-    final = monitor.reception[-1]
+    final = next(rec for rec in reversed(monitor.reception) if rec["end_of_data"])
     table = EstimateTable.from_messages(monitor.latest, layout=args.layout)
     results = table.to_dict()
     requirements = requirement_times(monitor.history, monitor.reception)

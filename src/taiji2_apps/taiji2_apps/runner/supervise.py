@@ -73,8 +73,7 @@ def run_graph(graph: Graph) -> RunResult:
             for spec in graph.nodes:
                 with interrupts.held():
                     nodes.append(start(spec, graph.log_dir))
-            failure = _supervise(graph, nodes, started)
-            wall_s = time.monotonic() - started
+            failure, wall_s = _supervise(graph, nodes, started)
         finally:
             wall_s = wall_s or time.monotonic() - started
             last_wait_s = max(graph.min_last_stop_s, graph.timeout_s - (time.monotonic() - started))
@@ -92,8 +91,9 @@ def _ended_badly(nodes: Sequence[Running]) -> str | None:
     return None
 
 
-def _supervise(graph: Graph, nodes: Sequence[Running], started: float) -> str | None:
-    """Wait until the run is done; returns why it failed (None: done)."""
+def _supervise(graph: Graph, nodes: Sequence[Running], started: float) -> tuple[str | None, float]:
+    """Wait until the run is done; returns why it failed (None: done) and the wall time to the end or the failure
+    (not counting the wait for the self-ending nodes after the end)."""
     ends = [n for n in nodes if n.spec.ends]
     last_line = -float("inf")
     seen: Progress | None = None
@@ -102,7 +102,7 @@ def _supervise(graph: Graph, nodes: Sequence[Running], started: float) -> str | 
         graph.wait(graph.poll_s)
         failure = _ended_badly(nodes)
         if failure is not None:
-            return failure
+            return failure, time.monotonic() - started
         if graph.done():
             break
         now = time.monotonic()
@@ -112,12 +112,14 @@ def _supervise(graph: Graph, nodes: Sequence[Running], started: float) -> str | 
         if progress != seen or any(not n.ended() for n in ends):
             seen, moved = progress, now
         elif now - moved > graph.stall_s:
-            return graph.stall_message(graph.stall_s, progress)
+            return graph.stall_message(graph.stall_s, progress), now - started
         if now - started > graph.timeout_s:
-            return f"{graph.prefix} did not finish within {graph.timeout_s:g} s wall time; {progress.summary().strip()}"
+            return (f"{graph.prefix} did not finish within {graph.timeout_s:g} s wall time; "
+                    f"{progress.summary().strip()}", now - started)
         if now - last_line > graph.progress_period_s:
             last_line = now
             print(progress.line(now - started), file=sys.stderr)
+    wall_s = time.monotonic() - started
     # done: the self-ending nodes publish their last words (the simulator's diagnostics of the whole run) as they
     # exit; wait for them, bounded
     deadline = time.monotonic() + graph.end_grace_s
@@ -125,7 +127,7 @@ def _supervise(graph: Graph, nodes: Sequence[Running], started: float) -> str | 
         graph.wait(graph.poll_s)
     failure = _ended_badly(ends)
     if failure is not None:
-        return failure
+        return failure, wall_s
     for seconds in _DRAIN_WAITS_S:
         graph.wait(seconds)
-    return None
+    return None, wall_s
