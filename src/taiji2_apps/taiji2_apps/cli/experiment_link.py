@@ -6,7 +6,8 @@ estimators (on the contract topics the receiver publishes) and, with ``--record`
 the ground side. Reports per stream what the link did (generated, delivered, lost, duplicated,
 reordered, overwritten, latency), what the ground received, the link faults, and for each
 requirement the onboard (data) time and the ground time at which the ground first met it.
-Imports only the standard library at module level (a verb's rule).
+Runs the graph through :func:`taiji2_apps.runner.run_graph` (as without ``--link``). Imports only the standard
+library and the runner (standard library only) at module level (a verb's rule).
 """
 
 from __future__ import annotations
