@@ -3,10 +3,10 @@
 Starts spacecraft_sim (accelerated simulated time), maneuver_commander, scale_factor_estimator and
 com_offset_estimator as separate processes (the runner, taiji2_apps.runner) on the current runtime (the
 embedded Cyclone DDS runtime without ROS 2), optionally a bag recorder, waits for the simulated
-experiment to end and for the estimators to take its last sample, then prints the final estimates with their 1-sigma
-uncertainties against the simulator's truth and ends with the verdict: which requirements (G 0.3 %,
-d 100 um, 1 sigma) are met, which cannot be met with this maneuver and duration (their Cramer-Rao
-bound, and what to do), and what the simulator warned about.
+experiment to end and for the estimators to take its last sample, then prints the final estimates with
+their 1-sigma uncertainties against the simulator's truth and ends with the verdict: which requirements
+(G 0.3 %, d 100 um, 1 sigma) are met, which cannot be met with this maneuver and duration (their
+Cramer-Rao bound, and what to do), and what the simulator warned about.
 
 The default maneuver is the layout's shipped design (taiji2 design; --maneuver paper flies the
 paper's preset). Every argument is checked before a node starts. The graph runs on a private DDS
