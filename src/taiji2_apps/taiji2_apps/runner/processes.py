@@ -46,9 +46,9 @@ class Running:
             try:
                 if os.waitid(os.P_PID, self.popen.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT) is None:
                     return False
-            except ChildProcessError:  # already reaped elsewhere: Popen knows its status
+                self.signal(signal.SIGKILL)  # what the node left in its group (its pid is not free yet)
+            except ChildProcessError:  # reaped elsewhere: its pid may be reused, signal nothing
                 pass
-            self.signal(signal.SIGKILL)  # what the node left in its group (its pid is not free yet)
         self.returncode = self.popen.wait()
         return True
 
