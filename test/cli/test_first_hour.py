@@ -75,22 +75,18 @@ def test_experiment_refuses_an_existing_record_bag(tmp_path):
 
 
 def test_a_failed_node_is_reported_with_its_own_error_line(tmp_path):
-    from taiji2_apps.cli.experiment import _node_failure
-    from taiji2_apps.experiment_setup import node_error_line
+    from taiji2_apps.runner import error_line, failure_message
 
     log = tmp_path / "com_offset_estimator.log"
     log.write_text("[INFO] [1.0] [com_offset_estimator]: method gls\n"
                    "error: com_offset_estimator: layout 'x': no such file or built-in layout\n")
-    assert node_error_line(log) == "error: com_offset_estimator: layout 'x': no such file or built-in layout"
+    assert error_line(log) == "error: com_offset_estimator: layout 'x': no such file or built-in layout"
 
-    class Done:
-        returncode = 2
-
-    text = _node_failure("com_offset_estimator", Done(), log)
+    text = failure_message("com_offset_estimator", 2, log)
     assert "exited with status 2: error: com_offset_estimator: layout 'x'" in text and str(log) in text
     log.write_text("Traceback (most recent call last):\n  File x\nZeroDivisionError: division by zero\n")
-    assert node_error_line(log) == "ZeroDivisionError: division by zero"
-    assert node_error_line(tmp_path / "missing.log") is None
+    assert error_line(log) == "ZeroDivisionError: division by zero"
+    assert error_line(tmp_path / "missing.log") is None
 
 
 def test_experiment_default_maneuver_is_the_shipped_design_and_paper_is_the_preset():

@@ -5,4 +5,6 @@
 - :mod:`.campaign`: Monte Carlo campaigns on Dask
 - :mod:`.design`: maneuver design against the Cramer-Rao bound
 - :mod:`.experiment_setup`: what an experiment flies, from the command line's choices
+- :mod:`.runner`: the experiment runner (start, supervise, progress, stop) that ``taiji2 experiment`` runs its
+  graph with, with and without ``--link``
 """

@@ -3,7 +3,6 @@
 * :func:`plan_experiment`: every argument checked with the message the node that would refuse it
   gives (spacecraft_sim: layout, config, overrides; maneuver_commander: the maneuver file and its
   thrust; the estimators: the method), so a bad argument costs no node start;
-* :func:`node_error_line`: the one-line error a failed node printed in its log;
 * :func:`experiment_verdict`: the Cramer-Rao bound of the flown maneuver and duration
   (:func:`taiji2_estimator_pkg.core.crlb.crlb`) and the verdict (:mod:`taiji2_estimator_pkg.verdict`).
 """
@@ -15,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["MANEUVER_CHOICES", "ExperimentPlan", "experiment_verdict", "node_error_line", "plan_experiment"]
+__all__ = ["MANEUVER_CHOICES", "ExperimentPlan", "experiment_verdict", "plan_experiment"]
 
 #: ``--maneuver`` keywords (anything else is a maneuver file)
 MANEUVER_CHOICES = ("design", "paper")
@@ -124,19 +123,6 @@ def plan_experiment(layout: str, config_file: str, maneuver: str | None, duratio
         bad = next((o for o in overrides if o.split("=", 1)[0].strip().split(".")[0] in str(exc)), None)
         raise ValueError(f"--override {bad}: {exc}" if bad else str(exc)) from None
     return ExperimentPlan(source, config, float(duration_s), flown, kind, path, label)
-
-
-def node_error_line(log: Path) -> str | None:
-    """The last ``error: ...`` line of a node's log, else its last line (None: empty or unreadable)."""
-    try:
-        lines = [line.strip() for line in log.read_text(encoding="utf-8", errors="replace").splitlines()
-                 if line.strip()]
-    except OSError:
-        return None
-    errors = [line for line in lines if line.startswith(("error:", "Traceback", "[ERROR]", "[FATAL]"))]
-    if errors and errors[-1].startswith("Traceback"):
-        return lines[-1]
-    return errors[-1] if errors else (lines[-1] if lines else None)
 
 
 #: longer runs of a periodic maneuver get the bound of a whole number of periods scaled to the duration

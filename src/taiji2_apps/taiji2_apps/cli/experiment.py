@@ -1,12 +1,12 @@
 """Run a calibration experiment through the whole node graph and say which requirements it meets.
 
 Starts spacecraft_sim (accelerated simulated time), maneuver_commander, scale_factor_estimator and
-com_offset_estimator as separate processes on the current runtime (the embedded Cyclone DDS runtime
-without ROS 2), optionally a bag recorder, waits for the simulated experiment to end and for the
-estimators to take its last sample, then prints the final estimates with their 1-sigma
-uncertainties against the simulator's truth and ends with the verdict: which requirements (G 0.3 %,
-d 100 um, 1 sigma) are met, which cannot be met with this maneuver and duration (their Cramer-Rao
-bound, and what to do), and what the simulator warned about.
+com_offset_estimator as separate processes (the runner, taiji2_apps.runner) on the current runtime (the
+embedded Cyclone DDS runtime without ROS 2), optionally a bag recorder, waits for the simulated
+experiment to end and for the estimators to take its last sample, then prints the final estimates with
+their 1-sigma uncertainties against the simulator's truth and ends with the verdict: which requirements
+(G 0.3 %, d 100 um, 1 sigma) are met, which cannot be met with this maneuver and duration (their
+Cramer-Rao bound, and what to do), and what the simulator warned about.
 
 The default maneuver is the layout's shipped design (taiji2 design; --maneuver paper flies the
 paper's preset). Every argument is checked before a node starts. The graph runs on a private DDS
@@ -22,12 +22,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
-import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
+
+from taiji2_apps.runner import Graph, NodeProcess, Progress, run_graph
 
 _NS = 1_000_000_000
 
@@ -92,56 +91,10 @@ class _Monitor:
         return -1 if msg is None else min(estimate_stamps_ns(msg))
 
 
-def _spawn(argv: list[str], log: Path) -> subprocess.Popen:
-    handle = log.open("w")
-    return subprocess.Popen([sys.executable, "-m", "taiji2_apps.cli.main", *argv], stdout=handle,
-                            stderr=subprocess.STDOUT, env=dict(os.environ, PYTHONUNBUFFERED="1"))
-
-
-#: wall time a node has to stop after SIGINT before it is killed [s]
-_STOP_TIMEOUT_S = 10.0
-
-
-def _interrupt(procs: dict[str, subprocess.Popen], timeout_s: float) -> list[str]:
-    """SIGINT ``procs``, wait up to ``timeout_s`` for them all; returns the names that had to be killed."""
-    for proc in procs.values():
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-    deadline, killed = time.monotonic() + timeout_s, []
-    for name, proc in procs.items():
-        try:
-            proc.wait(timeout=max(0.0, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-            killed.append(name)
-    return killed
-
-
-def _stop(procs: dict[str, subprocess.Popen], recorder_timeout_s: float) -> str | None:
-    """SIGINT every node, the recorder last; returns why the recording is incomplete (None: it is not).
-
-    At the accelerated rate the recorder can trail the graph by a large share of the run: every raw
-    sample is already in its subscriptions (reliable, acknowledged to the simulator), and on SIGINT it
-    writes them all before it closes the bag. So it is stopped after the others, given the CPU they
-    used, and waited for with its own bound; killing it on the nodes' 10 s would lose that backlog."""
-    _interrupt({n: p for n, p in procs.items() if n != "recorder"}, _STOP_TIMEOUT_S)
-    recorder = procs.get("recorder")
-    if recorder is None:
-        return None
-    if recorder.poll() is None:
-        print("experiment: waiting for the recorder to write what it has received", file=sys.stderr)
-    if _interrupt({"recorder": recorder}, recorder_timeout_s):
-        return f"the recorder did not finish writing within {recorder_timeout_s:g} s and was killed"
-    if recorder.returncode != 0:
-        return f"the recorder exited with status {recorder.returncode}"
-    return None
-
-
-#: after the simulator has finished, wall time without any estimate moving before the run is declared stuck [s]
+#: after the simulator has finished, wall time without any estimate moving before the run is declared stuck [s];
+#: also the bound on the wait for the simulator to exit (and publish its final diagnostics) once the estimates
+#: have ended (it exits within seconds; a busy machine may take longer than the 15 s this was before)
 _STALL_S = 60.0
-#: wall time to wait for the simulator to exit (and publish its final diagnostics) after the estimates ended [s]
-_SIM_EXIT_S = 15.0
 
 
 def _private_domain() -> Any:
@@ -153,13 +106,6 @@ def _private_domain() -> Any:
     reservation = reserve_private_domain()
     os.environ["ROS_DOMAIN_ID"] = str(reservation.domain_id)  # this process and every node it starts
     return reservation
-
-
-def _node_failure(name: str, proc: subprocess.Popen, log: Path) -> str:
-    from taiji2_apps.experiment_setup import node_error_line
-
-    line = node_error_line(log)
-    return f"node {name} exited with status {proc.returncode}" + (f": {line}" if line else "") + f" (log: {log})"
 
 
 def main(args: argparse.Namespace) -> int:
@@ -209,8 +155,7 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, plan: Any, domain: int | None, temporary: bool) -> int:
-    from taiji2_apps.experiment_setup import experiment_verdict
-    from taiji2_estimator_pkg.report import EstimateTable, format_table
+    """The direct graph (one network) through :func:`~taiji2_apps.runner.run_graph`; returns the exit status."""
     from taiji2_runtime.ros import rclpy
 
     out = Path(args.out)
@@ -223,95 +168,81 @@ def _run(args: argparse.Namespace, plan: Any, domain: int | None, temporary: boo
     extra = 1 if args.record else 0
     subscribers = [1 + (args.method == "paper") + extra, 2 + extra, 2 + extra]
     est_args = ["--ros-args", "-p", f"layout:={args.config or args.layout}", "-p", f"method:={args.method}"]
-    commands = {
-        "scale_factor_estimator": ["run", "taiji2_estimator_pkg", "scale_factor_estimator", *est_args],
-        "com_offset_estimator": ["run", "taiji2_estimator_pkg", "com_offset_estimator", *est_args],
-        "maneuver_commander": ["run", "taiji2_sim_pkg", "maneuver_commander", "--ros-args", "-p",
-                               f"preset:={args.layout}", "-p", "use_sim_time:=true", "-p", "lookahead_s:=2.0",
-                               *plan.commander_parameters()],
-        "spacecraft_sim": ["run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", *source, "-p",
-                           f"seed:={args.seed}", "-p", f"duration_s:={args.duration_s}",
-                           "-p", f"wait_for_subscribers:={subscribers}",
-                           "-p", "config_overrides:=" + json.dumps(overrides)],
-    }
+    nodes = [
+        NodeProcess.taiji2("scale_factor_estimator",
+                           ["run", "taiji2_estimator_pkg", "scale_factor_estimator", *est_args]),
+        NodeProcess.taiji2("com_offset_estimator", ["run", "taiji2_estimator_pkg", "com_offset_estimator", *est_args]),
+        NodeProcess.taiji2("maneuver_commander", ["run", "taiji2_sim_pkg", "maneuver_commander", "--ros-args", "-p",
+                                                  f"preset:={args.layout}", "-p", "use_sim_time:=true", "-p",
+                                                  "lookahead_s:=2.0", *plan.commander_parameters()]),
+        # the simulator exits (0) when done; every other node runs until stopped
+        NodeProcess.taiji2("spacecraft_sim", ["run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", *source, "-p",
+                                              f"seed:={args.seed}", "-p", f"duration_s:={args.duration_s}",
+                                              "-p", f"wait_for_subscribers:={subscribers}",
+                                              "-p", "config_overrides:=" + json.dumps(overrides)], ends=True),
+    ]
     if args.record:
-        commands["recorder"] = ["bag", "record", "-a", "-o", args.record]
+        nodes.append(NodeProcess.taiji2("recorder", ["bag", "record", "-a", "-o", args.record], stop_last=True))
     rclpy.init(args=["taiji2-experiment"])
     node = rclpy.create_node("taiji2_experiment")
     monitor = _Monitor(node)
-    procs: dict[str, subprocess.Popen] = {}
-    started = time.monotonic()
-    status = 0
-    try:
-        for name, argv in commands.items():
-            procs[name] = _spawn(argv, out / f"{name}.log")
-        where = (f"DDS domain {domain} (private; set ROS_DOMAIN_ID to choose one)" if domain is not None
-                 else f"DDS domain {os.environ['ROS_DOMAIN_ID']}")
-        print(f"experiment: {args.config or args.layout}, {plan.maneuver_label}, {args.duration_s:g} s simulated, "
-              f"seed {args.seed}, method {args.method}; {where}; node logs in {out}", file=sys.stderr)
-        last_progress = 0.0
-        final_ns = n_steps * 100_000_000
-        topics = [f"/taiji2/estimates/grs{g}/{k}" for g in (1, 2) for k in ("scale_factors", "com_offset")]
-        topics.append("/taiji2/estimates/com_offset_difference")
-        stamps, moved = [monitor.through_ns(t) for t in topics], time.monotonic()
-        while True:
-            rclpy.spin_once(node, timeout_sec=0.1)
-            # the simulator exits (0) when done; every other node runs until stopped
-            failed = [n for n, p in procs.items()
-                      if p.poll() is not None and (p.returncode != 0 or n != "spacecraft_sim")]
-            if failed:
-                raise RuntimeError(_node_failure(failed[0], procs[failed[0]], out / f"{failed[0]}.log"))
-            if all(monitor.through_ns(t) >= final_ns for t in topics):
-                break
-            now = [monitor.through_ns(t) for t in topics]
-            if now != stamps or procs["spacecraft_sim"].poll() is None:
-                stamps, moved = now, time.monotonic()
-            elif time.monotonic() - moved > _STALL_S:
-                behind = ", ".join(f"{t} ({'none' if s < 0 else f'{s / _NS:g} s'})"
-                                   for t, s in zip(topics, now, strict=True) if s < final_ns)
-                raise RuntimeError(f"the simulator finished {args.duration_s:g} s, but no estimate has moved for "
-                                   f"{_STALL_S:g} s; short of the end: {behind} (see the estimator logs in {out})")
-            if time.monotonic() - started > args.timeout_s:
-                raise TimeoutError(f"experiment did not finish within {args.timeout_s:g} s wall time")
-            if time.monotonic() - last_progress > 5.0:
-                last_progress = time.monotonic()
-                done = max(0, min(monitor.through_ns(t) for t in topics)) / final_ns
-                print(f"  {100 * done:5.1f} % of {args.duration_s:g} s simulated "
-                      f"({time.monotonic() - started:.0f} s wall)", file=sys.stderr)
-        elapsed = time.monotonic() - started
-        # the simulator's final diagnostics (range peaks of the whole run) come just before it exits
-        deadline = time.monotonic() + _SIM_EXIT_S
-        while procs["spacecraft_sim"].poll() is None and time.monotonic() < deadline:
-            rclpy.spin_once(node, timeout_sec=0.1)
-        for _ in range(5):
-            rclpy.spin_once(node, timeout_sec=0.05)
-        table = EstimateTable.from_messages(monitor.latest, layout=args.layout)
-        verdict = experiment_verdict(plan, table, args.layout, monitor.diagnostics)
-        results = table.to_dict()
-        from taiji2_model.maneuver_families import maneuver_spec
+    final_ns = n_steps * 100_000_000
+    topics = [f"/taiji2/estimates/grs{g}/{k}" for g in (1, 2) for k in ("scale_factors", "com_offset")]
+    topics.append("/taiji2/estimates/com_offset_difference")
 
-        results["maneuver"] = {"kind": plan.maneuver_kind, "file": plan.maneuver_file,
-                               **maneuver_spec(plan.maneuver)}
-        results["verdict"] = verdict.to_dict()
-        (out / "results.json").write_text(json.dumps(results, indent=2))
-        if args.json:
-            print(json.dumps(results))
+    def progress() -> Progress:
+        stamps = tuple(monitor.through_ns(t) for t in topics)
+        return Progress(max(0, min(stamps)) / _NS, args.duration_s, marker=stamps)
+
+    def stalled(stall_s: float, now: Progress) -> str:
+        behind = ", ".join(f"{t} ({'none' if s < 0 else f'{s / _NS:g} s'})"
+                           for t, s in zip(topics, now.marker, strict=True) if s < final_ns)
+        return (f"the simulator finished {args.duration_s:g} s, but no estimate has moved for {stall_s:g} s; "
+                f"short of the end: {behind} (see the estimator logs in {out})")
+
+    graph = Graph(nodes, out, done=lambda: all(monitor.through_ns(t) >= final_ns for t in topics),
+                  progress=progress, wait=lambda s: rclpy.spin_once(node, timeout_sec=s), timeout_s=args.timeout_s,
+                  stall_s=_STALL_S, stall_message=stalled, end_grace_s=_STALL_S)
+    where = (f"DDS domain {domain} (private; set ROS_DOMAIN_ID to choose one)" if domain is not None
+             else f"DDS domain {os.environ['ROS_DOMAIN_ID']}")
+    print(f"experiment: {args.config or args.layout}, {plan.maneuver_label}, {args.duration_s:g} s simulated, "
+          f"seed {args.seed}, method {args.method}; {where}; node logs in {out}", file=sys.stderr)
+    try:
+        result = run_graph(graph)
+        if result.failure is not None:
+            print(f"error: taiji2 experiment: {result.failure}", file=sys.stderr)
+            status = 1
         else:
-            print(format_table(table))
-            kept = (f"results in {out / 'results.json'}" if not temporary or args.keep
-                    else "--out DIR keeps the node logs and results.json")
-            print(f"\n{args.duration_s:g} s simulated in {elapsed:.1f} s wall "
-                  f"({args.duration_s / elapsed:.0f}x real time); {kept}\n")
-            print("\n".join(verdict.lines()))
-        status = 0 if verdict.all_met else 3
-    except (RuntimeError, TimeoutError) as exc:
-        print(f"error: taiji2 experiment: {exc}", file=sys.stderr)
-        status = 1
+            status = _report(args, plan, monitor, out, temporary, result.wall_s)
     finally:
-        incomplete = _stop(procs, max(60.0, args.timeout_s - (time.monotonic() - started)))
         node.destroy_node()
         rclpy.try_shutdown()
-    if incomplete is not None:
-        print(f"error: taiji2 experiment: {incomplete}; see {out / 'recorder.log'}", file=sys.stderr)
+    for problem in result.stop_problems:  # the recording is incomplete
+        print(f"error: taiji2 experiment: {problem}", file=sys.stderr)
         status = 1
     return status
+
+
+def _report(args: argparse.Namespace, plan: Any, monitor: _Monitor, out: Path, temporary: bool,
+            elapsed: float) -> int:
+    """Print the final estimates and the verdict, write results.json; returns 0 (every requirement met) or 3."""
+    from taiji2_apps.experiment_setup import experiment_verdict
+    from taiji2_estimator_pkg.report import EstimateTable, format_table
+    from taiji2_model.maneuver_families import maneuver_spec
+
+    table = EstimateTable.from_messages(monitor.latest, layout=args.layout)
+    verdict = experiment_verdict(plan, table, args.layout, monitor.diagnostics)
+    results = table.to_dict()
+    results["maneuver"] = {"kind": plan.maneuver_kind, "file": plan.maneuver_file, **maneuver_spec(plan.maneuver)}
+    results["verdict"] = verdict.to_dict()
+    (out / "results.json").write_text(json.dumps(results, indent=2))
+    if args.json:
+        print(json.dumps(results))
+    else:
+        print(format_table(table))
+        kept = (f"results in {out / 'results.json'}" if not temporary or args.keep
+                else "--out DIR keeps the node logs and results.json")
+        print(f"\n{args.duration_s:g} s simulated in {elapsed:.1f} s wall "
+              f"({args.duration_s / elapsed:.0f}x real time); {kept}\n")
+        print("\n".join(verdict.lines()))
+    return 0 if verdict.all_met else 3

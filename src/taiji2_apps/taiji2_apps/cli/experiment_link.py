@@ -6,7 +6,8 @@ estimators (on the contract topics the receiver publishes) and, with ``--record`
 the ground side. Reports per stream what the link did (generated, delivered, lost, duplicated,
 reordered, overwritten, latency), what the ground received, the link faults, and for each
 requirement the onboard (data) time and the ground time at which the ground first met it.
-Imports only the standard library at module level (a verb's rule).
+Runs the graph through :func:`taiji2_apps.runner.run_graph` (as without ``--link``). Imports only the standard
+library and the runner (standard library only) at module level (a verb's rule).
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+from taiji2_apps.runner import Graph, NodeProcess, Progress, run_graph
 
 _NS = 1_000_000_000
 SCALE_FACTOR_NAMES = ("G_Pphi", "G_Ptheta", "G_Ppsi")
@@ -46,6 +49,9 @@ def estimate_stamps_ns(msg: Any) -> tuple[int, int]:
 
 #: wall time [s] between the monitor's checks of the nodes and of the end of the run
 MONITOR_PERIOD_S = 0.1
+#: after the simulator has finished, wall time without anything moving on the ground (estimates, reception
+#: records, the link's report) before the run is declared stuck [s] (as without --link)
+STALL_S = 60.0
 
 
 def spin_for(executor: Any, seconds: float, taken: Callable[[], int]) -> None:
@@ -254,8 +260,6 @@ def run_link_experiment(args: argparse.Namespace) -> int:
     """``taiji2 experiment --link``: the whole run (see the module docstring)."""
     import tempfile
 
-    from taiji2_apps.cli.experiment import _spawn, _stop
-    from taiji2_estimator_pkg.report import EstimateTable, format_table
     from taiji2_runtime.ros import rclpy
     from taiji2_sim_pkg.core.link import LinkError, load_link_model
 
@@ -316,93 +320,105 @@ def run_link_experiment(args: argparse.Namespace) -> int:
                             "-p", f"preset:={args.layout}", "-p", f"link_model:={args.link}",
                             "-p", f"start_s:={start_s}", "-p", f"duration_s:={duration_s - start_s}",
                             *[a for p in commander_maneuver for a in ("-p", p)]],
-        "spacecraft_sim": ["run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard",
-                           *onboard_remaps, *source, "-p", f"seed:={args.seed}", "-p", f"duration_s:={duration_s}",
-                           "-p", "wait_for_subscribers:=[1, 1, 1]", "-p", "publish_truth_kinematics:=false",
-                           "-p", "config_overrides:=" + json.dumps(overrides)],
     }
+    # the simulator exits (0) at the end of its data; every other node runs until stopped (what ends the run is
+    # the ground's: done(), below)
+    nodes = [NodeProcess.taiji2(name, argv) for name, argv in commands.items()]
+    nodes.append(NodeProcess.taiji2("spacecraft_sim", [
+        "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard", *onboard_remaps, *source,
+        "-p", f"seed:={args.seed}", "-p", f"duration_s:={duration_s}", "-p", "wait_for_subscribers:=[1, 1, 1]",
+        "-p", "publish_truth_kinematics:=false", "-p", "config_overrides:=" + json.dumps(overrides)], ends=True))
     if args.record:
-        commands["recorder"] = ["bag", "record", "-a", "-x", "^/(onboard|taiji2/sim)/", "-o", args.record]
+        nodes.append(NodeProcess.taiji2("recorder", ["bag", "record", "-a", "-x", "^/(onboard|taiji2/sim)/", "-o",
+                                                     args.record], stop_last=True))
     rclpy.init(args=["taiji2-experiment"])
     node = rclpy.create_node("taiji2_experiment_link")
     monitor = LinkMonitor(node)
     executor = rclpy.executors.SingleThreadedExecutor()
     executor.add_node(node)
-    procs: dict[str, Any] = {}
-    started = time.monotonic()
-    status = 0
+    sf_topics = [f"/taiji2/estimates/grs{g}/scale_factors" for g in (1, 2)]
+    d_topics = [f"/taiji2/estimates/grs{g}/com_offset" for g in (1, 2)]
+
+    def done() -> bool:
+        """The ground has received the end of the data, the link's report is in, and the last estimates rest on
+        all the data the ground released: d on the last GRS data *and* the last G."""
+        final = monitor.reception[-1] if monitor.reception and monitor.reception[-1]["end_of_data"] else None
+        if final is None or monitor.link_report is None:
+            return False
+        through = final["released_through_s"]
+        sf_target = max((v for k, v in through.items() if k != "executed_torque" and v is not None), default=0)
+        d_target = max((through.get(k) or 0 for k in ("grs1", "grs2")), default=0)
+        return (all(monitor.stamps_ns(t)[0] >= sf_target * _NS - 1000 for t in sf_topics)
+                and all(data >= d_target * _NS - 1000 and g >= sf_target * _NS - 1000
+                        for data, g in map(monitor.stamps_ns, d_topics)))
+
+    def progress() -> Progress:
+        stamps = tuple(map(monitor.stamps_ns, sf_topics + d_topics))
+        last = monitor.reception[-1] if monitor.reception else {}
+        onboard = max((v for v in last.get("released_through_s", {}).values() if v), default=0.0)
+        ground = last.get("ground_time_s") or 0.0
+        return Progress(max(0, min(min(s) for s in stamps)) / _NS, duration_s,
+                        f"ground released data through {onboard:.0f} s at ground time {ground:.0f} s",
+                        (stamps, len(monitor.reception), monitor.link_report is not None))
+
+    def stalled(stall_s: float, now: Progress) -> str:
+        return (f"the simulator finished {duration_s:g} s, but nothing has moved on the ground for {stall_s:g} s "
+                f"({now.summary().strip()}; see the ground node logs in {out})")
+
+    graph = Graph(nodes, out, done=done, progress=progress,
+                  wait=lambda s: spin_for(executor, s, lambda: monitor.taken), timeout_s=args.timeout_s,
+                  poll_s=MONITOR_PERIOD_S, stall_s=STALL_S, stall_message=stalled, end_grace_s=STALL_S)
+    print(f"experiment: {args.config or args.layout}, {duration_s:g} s simulated, seed {args.seed}, "
+          f"link {model.name} (seed {link_seed}); node logs in {out}", file=sys.stderr)
     try:
-        for name, argv in commands.items():
-            procs[name] = _spawn(argv, out / f"{name}.log")
-        print(f"experiment: {args.config or args.layout}, {duration_s:g} s simulated, seed {args.seed}, "
-              f"link {model.name} (seed {link_seed}); node logs in {out}", file=sys.stderr)
-        last_progress = 0.0
-        sf_topics = [f"/taiji2/estimates/grs{g}/scale_factors" for g in (1, 2)]
-        d_topics = [f"/taiji2/estimates/grs{g}/com_offset" for g in (1, 2)]
-        while True:
-            spin_for(executor, MONITOR_PERIOD_S, lambda: monitor.taken)
-            failed = [n for n, p in procs.items()
-                      if p.poll() is not None and (p.returncode != 0 or n != "spacecraft_sim")]
-            if failed:
-                raise RuntimeError(f"node {failed[0]} exited with status {procs[failed[0]].returncode}; "
-                                   f"see {out / (failed[0] + '.log')}")
-            final = monitor.reception[-1] if monitor.reception and monitor.reception[-1]["end_of_data"] else None
-            if final is not None and monitor.link_report is not None:
-                through = final["released_through_s"]
-                sf_target = max((v for k, v in through.items() if k != "executed_torque" and v is not None), default=0)
-                d_target = max((through.get(k) or 0 for k in ("grs1", "grs2")), default=0)
-                # done when the last estimates rest on all the data: d on the last GRS data *and* the last G
-                if (all(monitor.stamps_ns(t)[0] >= sf_target * _NS - 1000 for t in sf_topics)
-                        and all(data >= d_target * _NS - 1000 and g >= sf_target * _NS - 1000
-                                for data, g in map(monitor.stamps_ns, d_topics))):
-                    break
-            if time.monotonic() - started > args.timeout_s:
-                raise TimeoutError(f"experiment did not finish within {args.timeout_s:g} s wall time")
-            if time.monotonic() - last_progress > 5.0:
-                last_progress = time.monotonic()
-                rec = monitor.reception[-1] if monitor.reception else None
-                onboard = max((v for v in (rec or {}).get("released_through_s", {}).values() if v), default=0.0)
-                ground = (rec or {}).get("ground_time_s") or 0.0
-                print(f"  ground released data through {onboard:.0f} s of {duration_s:g} s (ground time "
-                      f"{ground:.0f} s; {time.monotonic() - started:.0f} s wall)", file=sys.stderr)
-        elapsed = time.monotonic() - started
-        table = EstimateTable.from_messages(monitor.latest, layout=args.layout)
-        results = table.to_dict()
-        requirements = requirement_times(monitor.history, monitor.reception)
-        for r in requirements:
-            r["pass"] = pass_of(r["ground_time_s"], model)
-        report = monitor.link_report
-        faults = dict(report.get("faults", {}))
-        faults.update({k: v for k, v in monitor.faults_seen.items() if k not in faults})
-        link = {"model": report["model"], "seed": link_seed, "streams": report["streams"],
-                "ground": final["counts"], "requirements": requirements, "faults": faults,
-                "contacts_used": report["contacts_used"], "never_transmitted": report["never_transmitted"],
-                "memory_peak_octets": report["memory_peak_octets"], "uplink": report["uplink"],
-                "final_ground_time_s": final["ground_time_s"], "wall_s": elapsed,
-                "speed_x_real_time": duration_s / elapsed}
-        link["commanding"] = commanding_summary(monitor.plan, [r for rec in monitor.reception
-                                                               for r in rec.get("command_reports", [])])
-        if link["commanding"]["lost_on_uplink"]:
-            faults["command table lost on uplink"] = ("TC[11,4] #" + ", #".join(
-                map(str, link["commanding"]["lost_on_uplink"])) + " never acknowledged")
-        results["link"] = link
-        (out / "results.json").write_text(json.dumps(results, indent=2))
-        if args.json:
-            print(json.dumps(results))
+        result = run_graph(graph)
+        if result.failure is not None:
+            print(f"error: taiji2 experiment: {result.failure}", file=sys.stderr)
+            status = 1
         else:
-            print(format_table(table))
-            print(format_link_report(link))
-            print(f"\n{duration_s:g} s simulated in {elapsed:.1f} s wall ({duration_s / elapsed:.0f}x real time); "
-                  f"results in {out / 'results.json'}")
-    except (RuntimeError, TimeoutError) as exc:
-        print(f"error: taiji2 experiment: {exc}", file=sys.stderr)
-        status = 1
+            _report(args, model, link_seed, monitor, out, duration_s, result.wall_s)
+            status = 0
     finally:
-        incomplete = _stop(procs, max(60.0, args.timeout_s - (time.monotonic() - started)))
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
-    if incomplete is not None:
-        print(f"error: taiji2 experiment: {incomplete}; see {out / 'recorder.log'}", file=sys.stderr)
+    for problem in result.stop_problems:  # the recording is incomplete
+        print(f"error: taiji2 experiment: {problem}", file=sys.stderr)
         status = 1
     return status
+
+
+def _report(args: argparse.Namespace, model: Any, link_seed: int, monitor: LinkMonitor, out: Path,
+            duration_s: float, elapsed: float) -> None:
+    """Print the final estimates and the link report, write results.json."""
+    from taiji2_estimator_pkg.report import EstimateTable, format_table
+
+    final = next(rec for rec in reversed(monitor.reception) if rec["end_of_data"])
+    table = EstimateTable.from_messages(monitor.latest, layout=args.layout)
+    results = table.to_dict()
+    requirements = requirement_times(monitor.history, monitor.reception)
+    for r in requirements:
+        r["pass"] = pass_of(r["ground_time_s"], model)
+    report = monitor.link_report
+    faults = dict(report.get("faults", {}))
+    faults.update({k: v for k, v in monitor.faults_seen.items() if k not in faults})
+    link = {"model": report["model"], "seed": link_seed, "streams": report["streams"],
+            "ground": final["counts"], "requirements": requirements, "faults": faults,
+            "contacts_used": report["contacts_used"], "never_transmitted": report["never_transmitted"],
+            "memory_peak_octets": report["memory_peak_octets"], "uplink": report["uplink"],
+            "final_ground_time_s": final["ground_time_s"], "wall_s": elapsed,
+            "speed_x_real_time": duration_s / elapsed}
+    link["commanding"] = commanding_summary(monitor.plan, [r for rec in monitor.reception
+                                                           for r in rec.get("command_reports", [])])
+    if link["commanding"]["lost_on_uplink"]:
+        faults["command table lost on uplink"] = ("TC[11,4] #" + ", #".join(
+            map(str, link["commanding"]["lost_on_uplink"])) + " never acknowledged")
+    results["link"] = link
+    (out / "results.json").write_text(json.dumps(results, indent=2))
+    if args.json:
+        print(json.dumps(results))
+    else:
+        print(format_table(table))
+        print(format_link_report(link))
+        print(f"\n{duration_s:g} s simulated in {elapsed:.1f} s wall ({duration_s / elapsed:.0f}x real time); "
+              f"results in {out / 'results.json'}")
