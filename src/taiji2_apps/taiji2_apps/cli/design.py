@@ -15,6 +15,8 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from taiji2_apps.cli.exit_status import ExitStatus
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -65,7 +67,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _fail(message: str) -> int:
     print(f"error: taiji2 design: {message}", file=sys.stderr)
-    return 2
+    return ExitStatus.BAD_INPUT
 
 
 def _say(line: str) -> None:

@@ -26,6 +26,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from taiji2_apps.cli.exit_status import ExitStatus
 from taiji2_apps.runner import Graph, NodeProcess, Progress, run_graph
 
 _NS = 1_000_000_000
@@ -126,13 +127,13 @@ def main(args: argparse.Namespace) -> int:
             raise ValueError(f"--record {args.record}: already exists; choose another output or remove it")
     except ValueError as exc:
         print(f"error: taiji2 experiment: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
+        return ExitStatus.BAD_INPUT
     args.duration_s, args.maneuver = plan.duration_s, plan.maneuver_file or ""
     try:
         reservation = _private_domain()
     except RuntimeError as exc:
         print(f"error: taiji2 experiment: {exc}", file=sys.stderr)
-        return 1
+        return ExitStatus.FAILED
     temporary = not args.out
     if temporary:
         args.out = tempfile.mkdtemp(prefix="taiji2-experiment-")
@@ -245,4 +246,4 @@ def _report(args: argparse.Namespace, plan: Any, monitor: _Monitor, out: Path, t
         print(f"\n{args.duration_s:g} s simulated in {elapsed:.1f} s wall "
               f"({args.duration_s / elapsed:.0f}x real time); {kept}\n")
         print("\n".join(verdict.lines()))
-    return 0 if verdict.all_met else 3
+    return ExitStatus.OK if verdict.all_met else ExitStatus.NOT_MET

@@ -20,6 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from taiji2_apps.cli.exit_status import ExitStatus
 from taiji2_apps.runner import Graph, NodeProcess, Progress, run_graph
 
 _NS = 1_000_000_000
@@ -274,7 +275,7 @@ def run_link_experiment(args: argparse.Namespace) -> int:
         model = model.with_faults(missed, lost_up)
     except LinkError as exc:
         print(f"error: taiji2 experiment: {exc}", file=sys.stderr)
-        return 2
+        return ExitStatus.BAD_INPUT
     link_seed = args.seed if args.link_seed is None else args.link_seed
     out = Path(args.out or tempfile.mkdtemp(prefix="taiji2-experiment-"))
     out.mkdir(parents=True, exist_ok=True)
@@ -295,7 +296,7 @@ def run_link_experiment(args: argparse.Namespace) -> int:
     if start_s >= duration_s:
         print(f"error: taiji2 experiment: --duration-s {duration_s:g} ends before the first command table can be "
               f"onboard ({start_s:g} s)", file=sys.stderr)
-        return 2
+        return ExitStatus.BAD_INPUT
     # every relay holds its output until the readers of this graph have matched it (nodes/subscribed_publisher.py):
     # star tracker (scale factors; the paper's d too), GRS (both estimators), executed torque, reception (this
     # monitor, the planner); the recorder reads every ground topic

@@ -19,11 +19,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
 import sys
 from collections.abc import Sequence
 from types import ModuleType
 
+from taiji2_apps.cli.exit_status import ExitStatus
 from taiji2_runtime.cli.plain_text import plain_text
 
 #: this project's verbs: name -> module (imported when the verb runs)
@@ -142,7 +142,7 @@ def _main(argv: list[str]) -> int:
     if module_name is None:
         # no verb, an option (--help) or an unknown verb: the full parser reports it
         build_parser().parse_args(argv)
-        return 2
+        return ExitStatus.BAD_INPUT
     # `taiji2 run pkg exe ...` passes everything after the executable to the node untouched
     if verb == "run":
         from taiji2_runtime.cli import run
@@ -153,7 +153,7 @@ def _main(argv: list[str]) -> int:
     except ImportError as exc:
         print(f"{_PROG}: error: verb {verb!r} is registered ({module_name}) but cannot be imported: {exc}",
               file=sys.stderr)
-        return 2
+        return ExitStatus.BAD_INPUT
     args = _verb_parser(verb, module).parse_args(argv)
     try:
         return int(args._module.main(args) or 0)
@@ -165,7 +165,7 @@ def _main(argv: list[str]) -> int:
         return 0
     except (ValueError, LookupError, OSError, RuntimeError) as exc:
         _report_error(f"{_PROG} {args.verb}", exc)
-        return 2
+        return ExitStatus.BAD_INPUT
 
 
 if __name__ == "__main__":

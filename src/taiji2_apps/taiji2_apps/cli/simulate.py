@@ -20,6 +20,8 @@ import json
 import sys
 from typing import Any
 
+from taiji2_apps.cli.exit_status import ExitStatus
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``taiji2 simulate``."""
@@ -131,7 +133,7 @@ def main(args: argparse.Namespace) -> int:
                                   commands, storage=args.storage, provenance=provenance)
     except (ConfigError, ValueError, TypeError) as exc:
         print(f"error: taiji2 simulate: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
+        return ExitStatus.BAD_INPUT
     print(json.dumps({"bag": str(bag), "samples": len(out), "fidelity": args.fidelity, "seed": args.seed,
                       "effects": specs}))
     return 0
