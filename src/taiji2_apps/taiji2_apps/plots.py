@@ -131,24 +131,26 @@ def plot_estimates(directory: Path, history: dict[str, np.ndarray], g_true: np.n
 
 def plot_error_vs_crlb(path: Path, history: dict[str, np.ndarray], g_true: np.ndarray, d_true: np.ndarray,
                        layout: Any, overrides: dict[str, Any]) -> None:
-    """|error| and reported sigma over time against the CRLB at the same durations (GRS1)."""
+    """|error| and reported sigma over time against the CRLB at the same durations (both GRS)."""
     t = history["t_s"]
     marks = np.unique(np.linspace(t[0], t[-1], 8).round(-1))
     bounds = [crlb_for_layout(layout, float(m), overrides=overrides) for m in marks]
     crlb_g = np.array([b.scale_factor_relative_sigma for b in bounds]) * 100
     crlb_d = np.array([b.com_offset_sigma for b in bounds]) * 1e6
-    fig, axes = plt.subplots(2, 3, figsize=(12, 6), sharex=True)
-    for j in range(3):
-        ax = axes[0, j]
+    fig, axes = plt.subplots(4, 3, figsize=(12, 11), sharex=True)
+    for j in range(6):  # GRS1 then GRS2: a row of G and a row of d each
+        grs, axis = j // 3 + 1, j % 3
+        ax = axes[2 * (grs - 1), axis]
         ax.semilogy(t, np.abs(history["g"][:, j] / g_true[j] - 1) * 100, lw=0.8, label="|error|")
         ax.semilogy(t, history["g_sigma"][:, j] / g_true[j] * 100, lw=1.2, label="reported sigma")
         ax.semilogy(marks, crlb_g[:, j], "k--o", ms=3, label="CRLB")
-        ax.set_title(f"GRS1 {G_NAMES[j]} [%]")
-        ax = axes[1, j]
+        ax.set_title(f"GRS{grs} {G_NAMES[axis]} [%]")
+        ax = axes[2 * (grs - 1) + 1, axis]
         ax.semilogy(t, np.abs(history["d"][:, j] - d_true[j]) * 1e6, lw=0.8, label="|error|")
         ax.semilogy(t, history["d_sigma"][:, j] * 1e6, lw=1.2, label="reported sigma")
         ax.semilogy(marks, crlb_d[:, j], "k--o", ms=3, label="CRLB")
-        ax.set_title(f"GRS1 d{'xyz'[j]} [um]")
+        ax.set_title(f"GRS{grs} d{'xyz'[axis]} [um]")
+    for ax in axes[-1]:
         ax.set_xlabel("time [s]")
     axes[0, 0].legend(fontsize=7)
     fig.suptitle("Error and reported sigma against the Cramer-Rao bound")

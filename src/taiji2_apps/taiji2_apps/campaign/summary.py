@@ -18,6 +18,18 @@ from taiji2_apps.campaign.case import PARAMETERS
 #: Bootstrap resamples and seed (the intervals are reproducible).
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 20261124
+#: Fewer seeds than this: the percentile bootstrap of a standard deviation is rough (with n seeds there are
+#: at most n**n resamples, the smallest of which repeat one seed and have std 0, and the interval
+#: undercovers), so the table and the plot say so.
+BOOTSTRAP_MIN_SEEDS = 20
+
+
+def few_seeds_note(n: int) -> str | None:
+    """A warning for intervals from ``n`` seeds, or None when there are enough."""
+    if n >= BOOTSTRAP_MIN_SEEDS:
+        return None
+    return (f"only {n} seeds: the 95 % bootstrap intervals are rough below {BOOTSTRAP_MIN_SEEDS} seeds "
+            "(run more seeds for intervals to rely on)")
 
 
 @dataclass
@@ -90,7 +102,8 @@ def format_summary(summaries: Sequence[ParameterSummary]) -> str:
     for s in summaries:
         if (s.group, s.method) != current:
             current = (s.group, s.method)
-            lines += ["", f"== {s.group} | method {s.method} | {s.n} seeds ==",
+            note = few_seeds_note(s.n)
+            lines += ["", f"== {s.group} | method {s.method} | {s.n} seeds ==", *([f"  note: {note}"] if note else []),
                       f"  {'parameter':14} {'unit':>4} {'mean err':>10} {'err std':>10} {'mean sig':>10} "
                       f"{'CRLB':>10} {'std/CRLB [95% CI]':>22} {'std/sig [95% CI]':>22}"]
         lines.append(f"  {s.parameter:14} {s.unit:>4} {s.mean_error:10.4g} {s.error_std:10.4g} {s.mean_sigma:10.4g} "
