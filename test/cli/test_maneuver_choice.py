@@ -7,10 +7,11 @@ import subprocess
 
 import pytest
 
-from support import PYTHON, python_subprocess_env
 from taiji2_apps.experiment_setup import plan_experiment
 from taiji2_apps.maneuver_choice import choose_maneuver
 from taiji2_model.maneuver_families import builtin_maneuver_file, maneuver_spec
+
+from support import PYTHON, python_subprocess_env
 
 
 @pytest.mark.parametrize("layout", ["type1", "type2"])
