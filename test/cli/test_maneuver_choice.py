@@ -33,7 +33,7 @@ def test_a_config_file_flies_its_own_preset_by_default(tmp_path):
 
 
 def test_a_bad_choice_is_one_line():
-    with pytest.raises(ValueError, match="no_such.yaml"):
+    with pytest.raises(ValueError, match=r"no_such\.yaml"):
         choose_maneuver("type1", "no_such.yaml", None)
 
 
