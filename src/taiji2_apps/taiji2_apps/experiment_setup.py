@@ -58,6 +58,12 @@ class ExperimentPlan:
         """The maneuver lasts the whole run (zero torque after its end otherwise)."""
         return self.maneuver.start_s <= 0.0 and self.maneuver.start_s + self.maneuver.duration_s >= self.duration_s
 
+    def provenance(self) -> dict[str, Any]:
+        """What was flown, as results.json records it: kind, file and the maneuver's parameters."""
+        from taiji2_model.maneuver_families import maneuver_spec
+
+        return {"kind": self.maneuver_kind, "file": self.maneuver_file, **maneuver_spec(self.maneuver)}
+
     def commander_parameters(self) -> list[str]:
         """``-p`` arguments of maneuver_commander for this maneuver."""
         if self.maneuver_file:
