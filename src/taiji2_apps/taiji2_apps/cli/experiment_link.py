@@ -137,6 +137,14 @@ class LinkMonitor:
                     name, _, text = part.partition(": ")
                     self.faults_seen[name] = text
 
+    def scale_factors_determined(self) -> bool:
+        """The latest scale factors of both GRS are finite (the data determined them: the scale-factor estimator
+        publishes NaN until then, and the c.m.-offset estimator waits for finite ones)."""
+        import math
+
+        messages = [self.latest.get(f"/taiji2/estimates/grs{g}/scale_factors") for g in (1, 2)]
+        return all(m is not None and all(map(math.isfinite, (*m.scale_factors, *m.covariance))) for m in messages)
+
     def stamps_ns(self, topic: str) -> tuple[int, int]:
         """:func:`estimate_stamps_ns` of the latest estimate on ``topic`` ((-1, -1): none yet)."""
         msg = self.latest.get(topic)
@@ -359,9 +367,12 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         through = final["released_through_s"]
         sf_target = max((v for k, v in through.items() if k != "executed_torque" and v is not None), default=0)
         d_target = max((through.get(k) or 0 for k in ("grs1", "grs2")), default=0)
-        return (all(monitor.stamps_ns(t)[0] >= sf_target * _NS - 1000 for t in sf_topics)
-                and all(data >= d_target * _NS - 1000 and g >= sf_target * _NS - 1000
-                        for data, g in map(monitor.stamps_ns, d_topics)))
+        if not all(monitor.stamps_ns(t)[0] >= sf_target * _NS - 1000 for t in sf_topics):
+            return False
+        if not monitor.scale_factors_determined() and all(monitor.latest.get(t) is None for t in d_topics):
+            return True  # G undetermined on all the data (e.g. no maneuver flown): no d can come; the verdict says
+        return all(data >= d_target * _NS - 1000 and g >= sf_target * _NS - 1000
+                   for data, g in map(monitor.stamps_ns, d_topics))
 
     def progress() -> Progress:
         stamps = tuple(map(monitor.stamps_ns, sf_topics + d_topics))
