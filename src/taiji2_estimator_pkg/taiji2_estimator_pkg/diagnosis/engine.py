@@ -26,11 +26,10 @@ The plot data (:mod:`.stages.plots`) close the result. The candidate record buil
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
-from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
 from taiji2_estimator_pkg.diagnosis.results import DiagnosisResult, EffectReport, insufficient
 from taiji2_estimator_pkg.diagnosis.sensitivities import variant_sensitivities
 from taiji2_estimator_pkg.diagnosis.stages.corrected import correct_calibration
@@ -52,8 +51,6 @@ from taiji2_estimator_pkg.diagnosis.stages.where import locate
 from taiji2_model.config import SimConfig
 
 __all__ = ["DiagnosisOptions", "DiagnosisResult", "EffectReport", "diagnose", "variant_sensitivities"]
-
-Progress = Callable[[str], None]
 
 
 def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: DiagnosisOptions | None = None,

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from taiji2_estimator_pkg.diagnosis.record import RecordSettings
 
-__all__ = ["DiagnosisOptions", "record_settings"]
+__all__ = ["DiagnosisOptions", "Progress", "record_settings"]
+
+Progress = Callable[[str], None]
+"""Receives one-line progress messages."""
 
 
 @dataclass(frozen=True)

@@ -3,21 +3,19 @@ under it (:func:`..extended.corrected_calibration`), and that extended layout (`
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from taiji2_estimator_pkg.diagnosis.extended import corrected_calibration, extended_layout, named_extension
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
-from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
 from taiji2_estimator_pkg.diagnosis.results import EffectReport
 from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
 from taiji2_model.config import SimConfig
 
 __all__ = ["Corrected", "correct_calibration"]
-
-Progress = Callable[[str], None]
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ of the nominal model is still open (tested over those locations only).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,15 +19,13 @@ from scipy.optimize import minimize
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.locations import Location
-from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
 from taiji2_estimator_pkg.diagnosis.record import Record
 from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
 from taiji2_estimator_pkg.diagnosis.stages.selection import Selection
 from taiji2_estimator_pkg.diagnosis.stages.where import Scan, Where, scan
 
 __all__ = ["FinalModel", "describe_locations", "final_scan"]
-
-Progress = Callable[[str], None]
 
 
 @dataclass(frozen=True)

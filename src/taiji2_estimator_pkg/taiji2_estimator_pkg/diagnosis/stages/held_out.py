@@ -7,7 +7,7 @@ after the latest modelled onset (and all before it), the rest is held out.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -17,15 +17,13 @@ from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.evaluation import held_out_deterministic, held_out_noise
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
-from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
 from taiji2_estimator_pkg.diagnosis.record import Record, RecordSettings
 from taiji2_estimator_pkg.diagnosis.results import EffectReport
 from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
 from taiji2_estimator_pkg.diagnosis.stages.selection import Selection
 
 __all__ = ["check_held_out"]
-
-Progress = Callable[[str], None]
 
 
 def check_held_out(inp: DiagnosisInput, nominal: Nominal, selection: Selection, reports: Sequence[EffectReport],

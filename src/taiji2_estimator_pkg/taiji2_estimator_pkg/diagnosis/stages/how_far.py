@@ -9,7 +9,7 @@ the gap at the top nominal locations before and after each accepted effect (:fun
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,7 +18,7 @@ import numpy as np
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.evaluation import accepted_report_data, how_far, noise_report_data
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
-from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
 from taiji2_estimator_pkg.diagnosis.partners import jointly_determined
 from taiji2_estimator_pkg.diagnosis.record import Record
 from taiji2_estimator_pkg.diagnosis.results import EffectReport
@@ -29,8 +29,6 @@ from taiji2_estimator_pkg.diagnosis.stages.selection import Selection
 from taiji2_estimator_pkg.diagnosis.stages.where import Where
 
 __all__ = ["HowFar", "measure_how_far"]
-
-Progress = Callable[[str], None]
 
 _ONSET_KEYS = ("value", "sigma", "mle", "delta_chi2", "interval", "resolution_s", "kind", "modelled")
 

@@ -10,7 +10,7 @@ the convergence and moves the point again if needed (:func:`fit_nominal`).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -21,13 +21,11 @@ from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate,
 from taiji2_estimator_pkg.diagnosis.extended import extend_model
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
-from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, record_settings
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress, record_settings
 from taiji2_estimator_pkg.diagnosis.record import Record, RecordSettings, calibrate
 
 __all__ = ["InsufficientData", "Nominal", "Start", "admit", "calibrate_start", "fit_nominal", "input_summary",
            "with_stamp_phases"]
-
-Progress = Callable[[str], None]
 
 
 class InsufficientData(Exception):

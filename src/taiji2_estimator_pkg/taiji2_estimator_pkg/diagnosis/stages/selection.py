@@ -12,18 +12,15 @@ its onset is modelled when the profile likelihood over the onset says it starts 
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES, Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.onset import onset_posterior
-from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
 from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
 
 __all__ = ["Selection", "select_effects"]
-
-Progress = Callable[[str], None]
 
 
 @dataclass(frozen=True)

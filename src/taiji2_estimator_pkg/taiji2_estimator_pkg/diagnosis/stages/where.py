@@ -4,7 +4,7 @@ significant locations. :func:`scan` is also the final scan's (stage 4)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -13,14 +13,12 @@ import numpy as np
 from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.locations import Location, LocationGrid, scan_locations, time_window
-from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
 from taiji2_estimator_pkg.diagnosis.record import Record
 from taiji2_estimator_pkg.diagnosis.spectral import dft
 from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
 
 __all__ = ["Scan", "ScanGrid", "Where", "locate", "scan", "scan_grid"]
-
-Progress = Callable[[str], None]
 
 
 @dataclass(frozen=True)
