@@ -50,6 +50,8 @@ from taiji2_estimator_pkg.diagnosis.stages.selection import select_effects
 from taiji2_estimator_pkg.diagnosis.stages.where import locate
 from taiji2_model.config import SimConfig
 
+# the settings, result types and variant_sensitivities stay importable from here (their homes: .options,
+# .results, .sensitivities)
 __all__ = ["DiagnosisOptions", "DiagnosisResult", "EffectReport", "diagnose", "variant_sensitivities"]
 
 
