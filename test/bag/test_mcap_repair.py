@@ -7,9 +7,10 @@ import logging
 import numpy as np
 import pytest
 
-from contract_bags import ground_segment_data, write_ground_segment_bag
 from taiji2_estimator_pkg.io import RawBagError, load_raw_bag
 from taiji2_runtime.bag.mcap_repair import MCAP_MAGIC, complete_records_end
+
+from contract_bags import ground_segment_data, write_ground_segment_bag
 
 
 def _cut(bag, fraction):
