@@ -73,7 +73,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["GRID_TOLERANCE", "REASONS", "SLOT_SAMPLES", "Epoch", "EpochAssembler", "GriddedStreams",
-           "UndeterminedError", "grid_streams"]
+           "UndeterminedError", "circular_offset", "grid_streams"]
 
 #: a stamp this far behind its stream's latest [ns] is a step back in time, not a late sample
 RESTART_STEP_BACK_NS = 1_000_000_000
@@ -95,7 +95,7 @@ class UndeterminedError(ValueError):
         self.reason = reason
 
 
-def _slot(offsets_ns: Sequence[int] | np.ndarray, period_ns: int) -> int:
+def circular_offset(offsets_ns: Sequence[int] | np.ndarray, period_ns: int) -> int:
     """Circular median of stamp offsets modulo the period, in [-P/2, P/2) [ns].
 
     The offsets are unwrapped around the first one (each moved by a whole number of periods to
@@ -246,7 +246,7 @@ def grid_streams(streams: Mapping[str, tuple[Any, Any]], period_s: float,
         if not t.size:
             out.index[name], out.stamps_ns[name], out.values[name] = np.zeros(0, np.int64), t, x
             continue
-        slot = _slot(t[:SLOT_SAMPLES] - origin, period_ns)
+        slot = circular_offset(t[:SLOT_SAMPLES] - origin, period_ns)
         out.slot_ns[name] = slot
         index, residual = _place(t, origin, slot, period_ns)
         keep = np.abs(residual) <= GRID_TOLERANCE * period_ns
@@ -383,7 +383,8 @@ class EpochAssembler:
         for s in self.streams:
             waiting = self._unplaced[s]
             if waiting and (len(waiting) >= SLOT_SAMPLES or final or self._is_dead(s)):
-                self.slot_ns[s] = _slot([t - self.origin_ns for t, _ in waiting[:SLOT_SAMPLES]], self.period_ns)
+                self.slot_ns[s] = circular_offset([t - self.origin_ns for t, _ in waiting[:SLOT_SAMPLES]],
+                                                  self.period_ns)
                 self._unplaced[s] = []
                 for t, payload in waiting:
                     self._put(s, t, payload)
@@ -450,6 +451,11 @@ class EpochAssembler:
         return [self._release(j) for j in sorted(self._pending)]
 
     # -- counts ---------------------------------------------------------------------------------
+    @property
+    def released_ns(self) -> int:
+        """Instant of the last released epoch [ns] (-1: none yet)."""
+        return -1 if self.origin_ns is None or self._released < 0 else self.origin_ns + self._released * self.period_ns
+
     def grid_stamps(self) -> int:
         """Epochs from the origin to the last released epoch."""
         return self._released + 1

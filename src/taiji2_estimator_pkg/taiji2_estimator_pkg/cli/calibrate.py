@@ -78,7 +78,10 @@ def _main(args: argparse.Namespace) -> int:
             record.quat_xyzw, record.voltages_v, corrections = correct_raw(record.t_s, record.quat_xyzw,
                                                                            record.voltages_v, layout)
     for topic, report in raw.report.items():
-        for reason, n in {**report.dropped, **report.flagged}.items():
+        # the loader's stamp flags are left to the epoch rule: it counts the duplicates it refuses, and uses
+        # (sorted) the samples a bag holds out of stamp order
+        flagged = {r: n for r, n in report.flagged.items() if r not in ("duplicate_stamp", "out_of_order_stamp")}
+        for reason, n in {**report.dropped, **flagged}.items():
             record.count(topic, reason, n)
     table = calibrate(record, instrument, args.method)
     if not table.extra["determined"]:

@@ -492,7 +492,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     result = DiagnosisResult(status="ok", model=model.summary(), inputs={
         "samples": inp.n, "duration_s": inp.duration_s, "rejected": dict(inp.rejected),
         "rejected_total": int(sum(inp.rejected.values())), "t0_s": float(inp.t_s[0]) if inp.n else None,
-        "stamp_phase_s": dict(inp.stamp_phase_s)})
+        "stamp_phase_s": dict(inp.stamp_phase_s), "bridged": dict(inp.bridged)})
     minimum = options.min_duration_s if options.min_duration_s is not None else max(3 * model.maneuver_period_s, 600.0)
     if abs(inp.sample_rate_hz - model.sample_rate_hz) > 1e-9 * model.sample_rate_hz:
         return _insufficient(result, f"sample rate {inp.sample_rate_hz} Hz differs from the model's "
