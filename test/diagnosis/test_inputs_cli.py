@@ -50,12 +50,12 @@ def test_prepare_input_counts_bridges_short_gaps_and_keeps_the_longest_segment()
     change = quat_multiply(quat_conjugate(out.st_quat_xyzw[100]), inp.st_quat_xyzw[100])
     angle = np.linalg.norm(rotvec_from_quat(change))
     assert angle < 5e-6
-    # a gap longer than 1 s (15 GRS1 samples) ends a segment: the longest one is used, the rest counted
-    v[300:315, 0] = np.nan
+    # a gap longer than 5 s (60 GRS1 samples) ends a segment: the longest one is used, the rest counted
+    v[300:360, 0] = np.nan
     inp = prepare_input(t, q, v, commands, 10.0)
-    assert inp.n == 1200 - 315
-    np.testing.assert_allclose(inp.t_s, t[315:], rtol=0, atol=1e-9)
-    assert inp.rejected["outside_run"] == 300 and inp.rejected["unmatched"] == 15
+    assert inp.n == 1200 - 360
+    np.testing.assert_allclose(inp.t_s, t[360:], rtol=0, atol=1e-9)
+    assert inp.rejected["outside_run"] == 300 and inp.rejected["unmatched"] == 60
     # sign flips of the quaternion are the same attitude: made continuous
     q2 = out.st_quat_xyzw.copy()
     q2[500:] *= -1.0

@@ -11,7 +11,7 @@ only the effects that stand on their own, and writes report.md, report.json and 
 (docs/interfaces.md, recognised by content). Method: docs/diagnosis.md.
 
 The streams are assigned to epochs by the one rule of ``taiji2_estimator_pkg.epochs`` (the same as
-``taiji2 calibrate`` and the estimator nodes); gaps of up to 1 s are bridged, longer ones end a segment
+``taiji2 calibrate`` and the estimator nodes); gaps of up to 5 s are bridged, longer ones end a segment
 (docs/diagnosis.md, inputs).
 
 Exit status: 0 diagnosed, 3 insufficient data, 2 bad input (one-line error), 4 result cannot be
@@ -147,7 +147,7 @@ def _main(args: argparse.Namespace) -> int:
         inp = _load_bag(path, config.sample_rate_hz, time_correlation_from(args.time_correlation))
     rejected = sum(inp.rejected.values())
     progress(f"{inp.n} samples on the grid ({inp.duration_s:.0f} s), {rejected} rejected {inp.rejected or ''}"
-             + (f", bridged (gaps <= 1 s interpolated) {inp.bridged}" if inp.bridged else ""))
+             + (f", bridged (gaps <= 5 s) {inp.bridged}" if inp.bridged else ""))
     result = diagnose(inp, config, options, progress)
     files = write_report(result, args.out, plots=not args.no_plots)
     progress(f"wrote {', '.join(str(p) for p in files.values())}")

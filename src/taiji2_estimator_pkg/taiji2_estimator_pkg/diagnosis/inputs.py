@@ -9,14 +9,14 @@ estimator nodes: GRS instants, each stream at its own constant offset, counted r
 
 Gaps. The diagnosis's channels difference consecutive samples and its fits are spectral (one
 contiguous grid), so a gap cannot simply be left empty. A gap of a stream of at most
-:data:`MAX_BRIDGE_SAMPLES` samples (1 s at 10 Hz; packet losses) with samples on both sides is
-*bridged*: its samples are interpolated from the stream's neighbours (the attitude along the
-rotation between them, the voltages linearly), counted per stream in ``bridged``, and used. Over
-1 s the interpolation differs from the true attitude by at most ``|omega_dot| (1 s)^2 / 8 = 6e-10
-rad`` with the nominal maneuvers (1/1000 of the star tracker's noise), and a bridged sample carries
-no noise of its own, so the diagnosis's noise estimates are slightly low where many are bridged
-(stated in its report: ``inputs.bridged``). A longer gap ends a segment; the diagnosis uses the
-longest segment and counts the valid samples outside it as ``outside_run``.
+:data:`MAX_BRIDGE_SAMPLES` samples (5 s at 10 Hz: lost packets and their bursts) with samples on both
+sides is *bridged* (:func:`_bridge_all`), counted per stream in ``bridged``, and used: the attitude
+along the rotation between its neighbours (over 5 s at most ``|omega_dot| T^2 / 8 = 5e-9 x 25 / 8 =
+1.6e-8 rad`` from the true attitude with the nominal maneuvers, 1/60 of the star tracker's noise); a
+GRS from the other GRS where it has the sample, else from the command's step and its neighbours. A
+bridged sample carries no noise of its own, so the diagnosis's noise estimates are slightly low where
+many are bridged (its report gives ``inputs.bridged``). A longer gap ends a segment; the diagnosis
+uses the longest segment and counts the valid samples outside it as ``outside_run``.
 
 Reasons: those of the epoch rule (``duplicate_stamp``, ``off_grid_stamp``, ``before_start``,
 ``duplicate_epoch``; a bulk read sorts each stream, so no ``out_of_order_stamp``), ``nan_or_inf``,
@@ -40,8 +40,8 @@ __all__ = ["MAX_BRIDGE_SAMPLES", "DiagnosisInput", "InputError", "align_streams"
 
 _QUAT_NORM_TOL = 1e-6  # accepted | |q| - 1 | (renormalised inside)
 _GRID_TOL = GRID_TOLERANCE  # accepted stamp deviation from the grid, fraction of 1/fs (the epoch rule's)
-#: longest gap of a stream bridged by interpolation [samples]
-MAX_BRIDGE_SAMPLES = 10
+#: longest gap of a stream bridged [samples] (5 s at 10 Hz)
+MAX_BRIDGE_SAMPLES = 50
 _STREAMS = ("star_tracker", "grs1", "grs2")
 
 
