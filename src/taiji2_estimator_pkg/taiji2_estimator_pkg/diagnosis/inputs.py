@@ -221,31 +221,29 @@ def _on_epochs(streams: dict[str, tuple[np.ndarray, np.ndarray]], fs: float, cou
 def _bridge_all(values: dict[str, np.ndarray], present: dict[str, np.ndarray], torque: np.ndarray) -> dict[str, int]:
     """Bridge the short gaps of every stream in place; returns the samples filled per stream.
 
-    The star tracker along the rotation between its neighbours. A GRS sample missing where the other
-    GRS has one is taken from the other, through the least-squares linear map between the two GRS'
-    voltages (and the command) fitted on the epochs both hold: the spacecraft's common angular and
-    linear acceleration (thruster noise, 30 times a GRS's own noise) then cancels in the differences
-    of the two GRS as it does in the data, which a fill from the sample's own neighbours would not give.
-    Where both are missing: the command's part plus the rest interpolated (:func:`_bridge`).
+    The star tracker along the rotation between its neighbours. The GRS: the spacecraft's common angular
+    and linear acceleration (thruster noise, ~30 times a GRS's own noise) must cancel in the differences
+    of the two GRS as it does in the data, which a fill from a sample's own neighbours would not give. So a
+    GRS1 sample missing where GRS2 has one is taken from GRS2 through the least-squares linear map
+    between the two GRS's voltages and the command (fitted on the epochs both hold) plus the interpolated
+    rest (their own noise); where both are missing, GRS1 from the command's step and its neighbours
+    (:func:`_bridge`) and GRS2 from that GRS1 through the map, so their difference is again the rest alone.
     """
     bridged = {}
     n = _bridge(values["star_tracker"], present["star_tracker"], quaternion=True)
     if n:
         bridged["star_tracker"] = n
-    grs = ("grs1", "grs2")
-    before = {g: present[g].copy() for g in grs}
-    own = {}
-    for g in grs:  # neighbours and command only (the fallback, and the other GRS's rows for the map)
+    received = {g: present[g].copy() for g in ("grs1", "grs2")}
+    own = {}  # each GRS from the command's step and its neighbours: the fallback, and the map's regressors
+    for g in received:
         own[g] = values[g].copy()
-        filled = before[g].copy()
-        _bridge(own[g], filled, quaternion=False, torque=torque)
-        own[g + "_present"] = filled
-    neighbours = {g: own[g].copy() for g in grs}  # the other GRS where it is missing too: its own fill
-    for g, o in (grs, grs[::-1]):
-        both = before[g] & before[o]
-        from_other = own[g + "_present"] & ~before[g] & before[o]
+        own[g + "_present"] = received[g].copy()
+        _bridge(own[g], own[g + "_present"], quaternion=False, torque=torque)
+    both = received["grs1"] & received["grs2"]
+    for g, o, source in (("grs1", "grs2", received["grs2"]), ("grs2", "grs1", own["grs1_present"])):
+        from_other = own[g + "_present"] & ~received[g] & source
         if np.count_nonzero(both) > 20 and np.any(from_other):
-            regressors = np.column_stack((neighbours[o], torque))
+            regressors = np.column_stack((own[o], torque))
             pair = both[1:] & both[:-1]
             slope, *_ = np.linalg.lstsq(np.diff(regressors, axis=0)[pair], np.diff(values[g], axis=0)[pair],
                                         rcond=None)
@@ -256,9 +254,10 @@ def _bridge_all(values: dict[str, np.ndarray], present: dict[str, np.ndarray], t
             _bridge(rest, rest_present, quaternion=False)
             from_other &= rest_present
             own[g][from_other] = (mapped + rest)[from_other]
-        n = int(np.count_nonzero(own[g + "_present"] & ~before[g]))
+    for g in received:
         values[g][:] = own[g]
         present[g][:] = own[g + "_present"]
+        n = int(np.count_nonzero(present[g] & ~received[g]))
         if n:
             bridged[g] = n
     return bridged
