@@ -1,6 +1,7 @@
 """scale_factor_estimator: running estimates of the angular scale factors of both GRS.
 
-Subscribes to the raw star-tracker and GRS voltage topics only, aligns them into epochs by stamp,
+Subscribes to the raw star-tracker and GRS voltage topics only, puts them into epochs by the one rule of
+:mod:`taiji2_estimator_pkg.epochs` (the star tracker at its own constant offset from the GRS, modelled),
 feeds :mod:`taiji2_estimator_pkg.core.scale_factor` (``method: gls`` the default two-stage filter
 with honest covariance, or ``method: paper``), and publishes per GRS
 ``/taiji2/estimates/grsN/scale_factors`` (with the cross-covariance of the joint estimate), the
