@@ -20,7 +20,9 @@ except ImportError:  # an editable install made before the package had modules
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "src" / "taiji2_estimator_pkg"))
 
 from taiji2_apps.cli import diagnose as verb
+from taiji2_estimator_pkg.core.attitude import quat_conjugate, quat_multiply, rotvec_from_quat
 from taiji2_estimator_pkg.diagnosis import InputError, align_streams, commands_on_grid, prepare_input
+from taiji2_estimator_pkg.epochs import UndeterminedError
 
 
 def _arrays(n=1200, seed=3, effects=()):
@@ -30,7 +32,7 @@ def _arrays(n=1200, seed=3, effects=()):
     return out, commands
 
 
-def test_prepare_input_counts_and_keeps_longest_run():
+def test_prepare_input_counts_bridges_short_gaps_and_keeps_the_longest_segment():
     out, commands = _arrays()
     q = out.st_quat_xyzw.copy()
     v = out.voltages_v.copy()
@@ -39,9 +41,21 @@ def test_prepare_input_counts_and_keeps_longest_run():
     v[700, 1, 3] = np.inf  # a bad voltage
     q[900] *= 1.01  # not unit norm
     inp = prepare_input(t, q, v, commands, 10.0)
-    assert inp.rejected["nan_or_inf"] == 2 and inp.rejected["non_unit_quaternion"] == 1
-    assert inp.n == 599 and np.array_equal(inp.t_s, t[101:700])  # the longest gap-free run
-    assert inp.rejected["outside_run"] == 1200 - 3 - 599
+    assert inp.rejected == {"nan_or_inf": 2, "non_unit_quaternion": 1}
+    # each bad value removes its own stream's sample; a gap of 1 sample is bridged: every sample used
+    assert inp.bridged == {"star_tracker": 2, "grs2": 1} and inp.n == 1200
+    np.testing.assert_allclose(inp.t_s, t, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(inp.voltages_v[:700], v[:700])
+    # the bridged attitude is within the star tracker's noise of the reading removed (0.2 arcsec = 1e-6 rad)
+    change = quat_multiply(quat_conjugate(out.st_quat_xyzw[100]), inp.st_quat_xyzw[100])
+    angle = np.linalg.norm(rotvec_from_quat(change))
+    assert angle < 5e-6
+    # a gap longer than 5 s (60 GRS1 samples) ends a segment: the longest one is used, the rest counted
+    v[300:360, 0] = np.nan
+    inp = prepare_input(t, q, v, commands, 10.0)
+    assert inp.n == 1200 - 360
+    np.testing.assert_allclose(inp.t_s, t[360:], rtol=0, atol=1e-9)
+    assert inp.rejected["outside_run"] == 300 and inp.rejected["unmatched"] == 60
     # sign flips of the quaternion are the same attitude: made continuous
     q2 = out.st_quat_xyzw.copy()
     q2[500:] *= -1.0
@@ -56,7 +70,11 @@ def test_prepare_input_duplicates_disorder_and_shapes():
     t[50] = t[49]  # duplicate stamp
     t[120], t[121] = t[121], t[120]  # disorder
     inp = prepare_input(t, out.st_quat_xyzw, out.voltages_v, commands, 10.0)
-    assert inp.rejected.get("duplicate_stamp", 0) == 1 and inp.rejected.get("out_of_order_stamp", 0) == 1
+    # the epoch rule: the repeated stamp refused in each stream (its epoch 5.0 s bridged), the swapped rows
+    # sorted by stamp (used, not refused)
+    assert inp.rejected == {"duplicate_stamp": 3} and inp.n == 200
+    assert inp.bridged == {"star_tracker": 1, "grs1": 1, "grs2": 1}
+    np.testing.assert_array_equal(inp.voltages_v[[120, 121]], out.voltages_v[[121, 120]])
     with pytest.raises(InputError, match=r"voltages_v: wrong shape \(200, 12\), expected \(n, 2, 6\)"):
         prepare_input(out.t_s, out.st_quat_xyzw, out.voltages_v.reshape(200, 12), commands, 10.0)
     with pytest.raises(InputError, match="torque_cmd_n_m: 10 samples, but t_s has 200"):
@@ -75,13 +93,20 @@ def test_align_streams_from_separate_stamps():
     cmd_rows = np.arange(0, 600, 10)
     inp = align_streams(st_t, out.st_quat_xyzw, g1_t, g1_v, out.t_s, out.voltages_v[:, 1],
                         out.t_s[cmd_rows] - 0.1, commands[cmd_rows], 10.0)
-    assert inp.rejected["unmatched"] == 1 and inp.n == 300  # the longest run: before the gap
-    assert inp.rejected["outside_run"] == 299
-    np.testing.assert_array_equal(inp.voltages_v, out.voltages_v[:300])
-    np.testing.assert_array_equal(inp.torque_cmd_n_m, commands[:300])  # ZOH of the 1 Hz command stream
+    assert inp.rejected == {} and inp.n == 600 and inp.bridged == {"grs1": 1}  # the lost sample bridged
+    keep = np.arange(600) != 300
+    np.testing.assert_array_equal(inp.voltages_v[keep], out.voltages_v[keep])
+    # taken from GRS2 through the map between the two GRS: the spacecraft's common acceleration noise comes with
+    # it (here 8 mV from the lost sample at most, against 74 mV for the mean of its neighbours)
+    midpoint = 0.5 * (out.voltages_v[299, 0] + out.voltages_v[301, 0])
+    error = np.abs(inp.voltages_v[300, 0] - out.voltages_v[300, 0])
+    assert np.max(error) < 0.25 * np.max(np.abs(midpoint - out.voltages_v[300, 0]))
+    np.testing.assert_array_equal(inp.torque_cmd_n_m, commands[np.arange(600) // 10 * 10])  # ZOH of the 1 Hz stream
+    # the diagnosis's grid is the star tracker's instants: the GRS (1 ms on average) against it
+    assert abs(inp.stamp_phase_s["grs"] - (0.001 - (inp.t_s[0] - out.t_s[0]))) < 1e-6
     held = commands_on_grid([0.0, 5.0], [[1.0, 0, 0], [2.0, 0, 0]], [0.05, 0.1, 5.07, 5.2], 10.0)
     np.testing.assert_array_equal(held[:, 0], [0.0, 1.0, 1.0, 2.0])
-    with pytest.raises(InputError, match="grs1: no valid sample"):
+    with pytest.raises(UndeterminedError, match=r"^grs1: no valid sample$"):
         align_streams(st_t, out.st_quat_xyzw, g1_t, g1_v * np.nan, out.t_s, out.voltages_v[:, 1], [0.0],
                       [[0.0, 0.0, 0.0]], 10.0)
 

@@ -28,17 +28,32 @@ def test_a_stream_silent_while_another_delivered_max_lag_stops_holding_epochs_ba
     out = []
     for k in range(40):
         out += a.add("star_tracker", k * DT, k)
-        if k == 23:                                 # the 19th star-tracker message since grs2's last
-            assert [e.t_ns for e in out] == [k * DT for k in range(5)]
+        if k == 28:                                 # the 19th star-tracker message since grs2's last
+            assert [e.t_ns for e in out] == [k * DT for k in range(10)]
+        out += a.add("grs1", k * DT, k)
+        if k < 10:
+            out += a.add("grs2", k * DT, k)
+    # grs2 stopped after 0.9 s: from star tracker's 20th message since (k = 29) it no longer holds epochs back
+    assert [e.t_ns for e in out] == [k * DT for k in range(40)]
+    assert all("grs2" not in e.samples for e in out[10:])
+    assert a.missing() == {"star_tracker": 0, "grs1": 0, "grs2": 30}
+    assert a.add("grs2", 11 * DT, 11) == []
+    assert a.refused == {"grs2": {"out_of_order_stamp": 1}}
+
+
+def test_a_stream_silent_before_its_slot_is_known_holds_epochs_back_until_it_stopped():
+    """A stream's first samples wait for its slot (SLOT_SAMPLES of them, or until it stopped)."""
+    a = EpochAssembler(STREAMS, max_lag_s=2.0)
+    out = []
+    for k in range(40):
+        out += a.add("star_tracker", k * DT, k)
+        if k == 23:                                 # grs2 sent 5 samples, then stopped: not yet declared
+            assert out == []
         out += a.add("grs1", k * DT, k)
         if k < 5:
             out += a.add("grs2", k * DT, k)
-    # grs2 stopped after 0.4 s: from star tracker's 20th message since (k = 24) it no longer holds epochs back
     assert [e.t_ns for e in out] == [k * DT for k in range(40)]
-    assert all("grs2" not in e.samples for e in out[5:])
-    assert a.missing() == {"star_tracker": 0, "grs1": 0, "grs2": 35}
-    assert a.add("grs2", 6 * DT, 6) == []
-    assert a.refused == {"grs2": {"out_of_order_stamp": 1}}
+    assert [len(e.samples) for e in out[:6]] == [3, 3, 3, 3, 3, 2]
 
 
 def test_a_stream_behind_in_a_backlog_is_waited_for_however_far_the_others_ran_in_stamps():

@@ -196,7 +196,7 @@ def test_a_restarted_node_resumes_from_its_checkpoint(context, executor, experim
     half = N // 2
     _feed(feeder, executor, out, range(half))
     half_ns = round(out.t_s[half - 1] * 1e9)
-    assert spin_until(executor, lambda: first.assembler._released_ns >= half_ns, timeout_s=60)
+    assert spin_until(executor, lambda: first.assembler.released_ns >= half_ns, timeout_s=60)
     first.destroy_node()  # the node goes down (checkpoint written at shutdown)
     assert checkpoint.exists()
     second = ScaleFactorEstimatorNode(context=context, cli_args=args)
@@ -228,7 +228,7 @@ def test_a_restarted_node_reports_its_resume_with_its_state_also_without_new_dat
     third = N // 3
     _feed(feeder, executor, out, range(third))
     third_ns = round(out.t_s[third - 1] * 1e9)
-    assert spin_until(executor, lambda: first.assembler._released_ns >= third_ns, timeout_s=60)
+    assert spin_until(executor, lambda: first.assembler.released_ns >= third_ns, timeout_s=60)
     first.destroy_node()  # checkpoint written at shutdown, at the last epoch
     checkpoint_s = first.last_t_ns / 1e9
     restored = first.estimator.estimate().n_samples

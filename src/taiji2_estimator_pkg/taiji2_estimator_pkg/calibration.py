@@ -1,9 +1,12 @@
 """Offline calibration of a whole recorded experiment: the estimator cores run in bulk on arrays.
 
-``align_streams`` puts the star tracker and both GRS on one regular 1/fs grid (missing samples are
-NaN rows, which the cores treat as missing); ``calibrate`` runs the scale-factor and c.m.-offset
-cores in bulk and returns an :class:`~taiji2_estimator_pkg.report.EstimateTable` with the counts of
-samples used and rejected, per stream and reason. No middleware: arrays in, numbers out.
+``align_streams`` assigns the star tracker and both GRS to epochs by the one rule of
+:mod:`taiji2_estimator_pkg.epochs` (the GRS instants are the epochs; each stream keeps its own
+constant time offset, which the scale-factor model takes into account; epochs without a sample of a
+stream are NaN rows, which the cores treat as missing); ``calibrate`` runs the scale-factor and
+c.m.-offset cores in bulk and returns an :class:`~taiji2_estimator_pkg.report.EstimateTable` with the
+counts of samples used and rejected, per stream and reason. A result the data cannot determine raises
+:class:`~taiji2_estimator_pkg.epochs.UndeterminedError`. No middleware: arrays in, numbers out.
 """
 
 from __future__ import annotations
@@ -17,16 +20,34 @@ import numpy as np
 from taiji2_estimator_pkg.core.com_offset.estimate import ComOffsetEstimate
 from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.pipeline import calibrate as pipeline_calibrate
+from taiji2_estimator_pkg.epochs import UndeterminedError, grid_streams
 from taiji2_estimator_pkg.report import EstimateTable, GrsResult
 
 GRS_IDS = (1, 2)
-#: A stamp further than this fraction of a sample period from the grid is not on the 1/fs grid.
-GRID_TOLERANCE = 0.25
+STREAMS = ("star_tracker", *(f"grs{g}" for g in GRS_IDS))
 
 
 @dataclass
 class AlignedRecord:
-    """Star tracker and both GRS on one regular grid (NaN rows: missing)."""
+    """Star tracker and both GRS assigned to the epochs (NaN rows: missing).
+
+    Attributes
+    ----------
+    t_s : numpy.ndarray
+        (n,) epoch instants (the GRS sampling instants) [s].
+    quat_xyzw : numpy.ndarray
+        (n, 4) star-tracker readout assigned to each epoch (taken ``star_tracker_offset_s`` after it).
+    voltages_v : numpy.ndarray
+        (n, 2, 6) GRS voltages [V].
+    rejected : dict
+        Stream -> reason -> samples refused.
+    missing : dict
+        Stream -> epochs without a sample of it (NaN rows: missing, not rejected).
+    offsets_s : dict
+        Stream -> its constant time offset after the GRS instants (the rule's slot) [s].
+    phase_s : dict
+        Stream -> median of its stamps' offsets from their epochs [s] (the robust phase, reported).
+    """
 
     t_s: np.ndarray
     quat_xyzw: np.ndarray
@@ -34,6 +55,13 @@ class AlignedRecord:
     rejected: dict[str, dict[str, int]] = field(default_factory=dict)
     #: stream -> grid rows without a sample of it (NaN rows: missing, not rejected)
     missing: dict[str, int] = field(default_factory=dict)
+    offsets_s: dict[str, float] = field(default_factory=dict)
+    phase_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def star_tracker_offset_s(self) -> float:
+        """Time of each star-tracker readout after its epoch's GRS instant [s] (constant)."""
+        return float(self.offsets_s.get("star_tracker", 0.0))
 
     def count(self, stream: str, reason: str, n: int) -> None:
         if n:
@@ -43,7 +71,7 @@ class AlignedRecord:
 
 def align_streams(star_t_ns: np.ndarray, quat_xyzw: np.ndarray, grs: Mapping[int, tuple[np.ndarray, np.ndarray]],
                   sample_rate_hz: float) -> AlignedRecord:
-    """Put the streams on the 1/fs grid that starts at the earliest stamp.
+    """Assign the streams to epochs by the one rule (:func:`taiji2_estimator_pkg.epochs.grid_streams`).
 
     Parameters
     ----------
@@ -59,47 +87,43 @@ def align_streams(star_t_ns: np.ndarray, quat_xyzw: np.ndarray, grs: Mapping[int
     Returns
     -------
     AlignedRecord
-        Duplicate stamps (first kept) and stamps off the grid are counted as rejected; grid rows
-        without a sample of a stream are counted as missing.
+        Refused samples counted per stream and reason (:data:`taiji2_estimator_pkg.epochs.REASONS`),
+        epochs without a sample of a stream counted as missing.
 
     Raises
     ------
-    ValueError
+    UndeterminedError
         If no stream has any sample.
     """
-    dt_ns = round(1e9 / sample_rate_hz)
-    streams = {"star_tracker": (np.asarray(star_t_ns, dtype=np.int64), np.asarray(quat_xyzw, dtype=np.float64))}
+    streams = {"star_tracker": (star_t_ns, np.asarray(quat_xyzw, dtype=np.float64).reshape(-1, 4))}
     for gid, (t_ns, volts) in grs.items():
-        streams[f"grs{gid}"] = (np.asarray(t_ns, dtype=np.int64), np.asarray(volts, dtype=np.float64))
-    starts = [t.min() for t, _ in streams.values() if t.size]
-    if not starts:
-        raise ValueError("no samples on any raw topic")
-    t0 = int(min(starts))
-    ends = [t.max() for t, _ in streams.values() if t.size]
-    n = round((max(ends) - t0) / dt_ns) + 1
-    record = AlignedRecord(t_s=(t0 + np.arange(n, dtype=np.int64) * dt_ns) / 1e9,
-                           quat_xyzw=np.full((n, 4), np.nan), voltages_v=np.full((n, len(GRS_IDS), 6), np.nan))
-    for name, (t_ns, values) in streams.items():
-        record.missing[name] = n
-        if not t_ns.size:
-            continue
-        position = (t_ns - t0) / dt_ns
-        index = np.rint(position).astype(np.int64)
-        on_grid = np.abs(position - index) <= GRID_TOLERANCE
-        record.count(name, "off_grid_stamp", int(np.count_nonzero(~on_grid)))
-        index, rows = index[on_grid], values[on_grid]
-        order = np.argsort(index, kind="stable")
-        index, rows = index[order], rows[order]
-        first = np.ones(index.size, dtype=bool)
-        first[1:] = index[1:] != index[:-1]
-        record.count(name, "duplicate_stamp", int(np.count_nonzero(~first)))
-        index, rows = index[first], rows[first]
-        record.missing[name] = n - int(index.size)
-        if name == "star_tracker":
-            record.quat_xyzw[index] = rows
-        else:
-            record.voltages_v[index, GRS_IDS.index(int(name[3:]))] = rows
-    return record
+        streams[f"grs{gid}"] = (t_ns, np.asarray(volts, dtype=np.float64).reshape(-1, 6))
+    gridded = grid_streams(streams, 1.0 / sample_rate_hz)
+    if gridded.n == 0:
+        raise UndeterminedError("star_tracker, grs1, grs2", "no sample on any raw topic")
+    voltages = np.full((gridded.n, len(GRS_IDS), 6), np.nan)
+    for gid in grs:
+        voltages[:, GRS_IDS.index(int(gid))] = gridded.on_grid(f"grs{gid}")
+    missing = gridded.missing()
+    for name in STREAMS:
+        missing.setdefault(name, gridded.n)
+    return AlignedRecord(t_s=gridded.t_ns / 1e9, quat_xyzw=gridded.on_grid("star_tracker"), voltages_v=voltages,
+                         rejected={k: dict(v) for k, v in gridded.refused.items()}, missing=missing,
+                         offsets_s={s: gridded.offset_s(s) for s in gridded.slot_ns},
+                         phase_s={s: v / 1e9 for s, v in gridded.phase_ns.items()})
+
+
+def require_streams(record: AlignedRecord) -> None:
+    """Raise :class:`UndeterminedError` naming the first stream without a single sample on an epoch.
+
+    The reason names what became of its samples (refused, by reason) or that it had none.
+    """
+    for name in STREAMS:
+        if record.missing.get(name, 0) >= record.t_s.size:
+            refused = record.rejected.get(name, {})
+            why = ("every sample refused (" + ", ".join(f"{r} {n}" for r, n in refused.items()) + ")"
+                   if refused else "no sample")
+            raise UndeterminedError(name, why)
 
 
 def _merge(*counts: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, int]]:
@@ -150,11 +174,20 @@ def calibrate(record: AlignedRecord, instrument: InstrumentModel, method: str = 
     -------
     EstimateTable
         With ``extra["rejected"]`` (stream -> reason -> count, each sample once), ``extra["missing"]``
-        (stream -> grid samples without a message) and ``extra["samples"]``.
+        (stream -> grid samples without a message), ``extra["samples"]``, ``extra["determined"]``,
+        ``extra["star_tracker_offset_s"]`` (the offset modelled) and ``extra["stream_phase_s"]``
+        (each stream's median stamp offset from its epochs).
+
+    Raises
+    ------
+    UndeterminedError
+        A raw stream without a single sample on an epoch (none received, or every one refused).
     """
     if method not in ("gls", "paper"):
         raise ValueError(f"method: {method!r} is not one of gls, paper")
-    result = pipeline_calibrate(record.t_s, record.quat_xyzw, record.voltages_v, instrument, GRS_IDS, method)
+    require_streams(record)
+    result = pipeline_calibrate(record.t_s, record.quat_xyzw, record.voltages_v, instrument, GRS_IDS, method,
+                                star_tracker_offset_s=record.star_tracker_offset_s)
     g, d = result.scale_factors, result.com_offsets
     rejected = _merge(record.rejected, _estimator_rejections(record, g.rejected, d.rejected))
     total_rejected = sum(sum(v.values()) for v in rejected.values())
@@ -173,6 +206,8 @@ def calibrate(record: AlignedRecord, instrument: InstrumentModel, method: str = 
                                 "samples": {"epochs": int(record.t_s.size), "scale_factor_updates": int(g.n_samples),
                                             "com_offset_updates": int(d.n_samples)},
                                 "determined": bool(g.determined and d.determined),
+                                "star_tracker_offset_s": record.star_tracker_offset_s,
+                                "stream_phase_s": dict(record.phase_s),
                                 **_com_offset_extra(d)})
 
 

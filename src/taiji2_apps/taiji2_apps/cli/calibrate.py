@@ -8,6 +8,12 @@ object with, per GRS, "scale_factors", "scale_factors_cov", "com_offset" (CRF, m
 samples used and rejected (per topic and reason, each sample once) and of the grid samples missing
 per topic ("missing": no message at that time; not rejected). BAG may also be a CCSDS packet file
 or directory (docs/interfaces.md), recognised by content; its defects are counted per topic.
+
+The streams are assigned to epochs by the one rule of ``taiji2_estimator_pkg.epochs`` (the GRS
+instants are the epochs; the star tracker keeps its own constant offset, which the estimator
+models). Exit status: 0 calibrated, 2 bad input, 4 result cannot be determined (a raw stream without
+a usable sample, or data that do not determine every parameter): one line
+``error: taiji2 calibrate: <stream>: <reason>``.
 """
 
 from __future__ import annotations
@@ -16,6 +22,9 @@ import argparse
 import json
 import sys
 import time
+
+#: exit status of a result the data cannot determine
+UNDETERMINED = 4
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -31,6 +40,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    """Run the calibration; returns the exit status (0, or :data:`UNDETERMINED` with one error line)."""
+    from taiji2_estimator_pkg.epochs import UndeterminedError
+
+    try:
+        return _main(args)
+    except UndeterminedError as exc:
+        print(f"error: taiji2 calibrate: {exc}", file=sys.stderr)
+        return UNDETERMINED
+
+
+def _main(args: argparse.Namespace) -> int:
+    from taiji2_estimator_pkg.epochs import UndeterminedError
+
     started = time.perf_counter()
     from taiji2_runtime.threads import limit_blas_threads
 
@@ -56,9 +78,16 @@ def main(args: argparse.Namespace) -> int:
             record.quat_xyzw, record.voltages_v, corrections = correct_raw(record.t_s, record.quat_xyzw,
                                                                            record.voltages_v, layout)
     for topic, report in raw.report.items():
-        for reason, n in {**report.dropped, **report.flagged}.items():
+        # the loader's stamp flags are left to the epoch rule: it counts the duplicates it refuses, and uses
+        # (sorted) the samples a bag holds out of stamp order
+        flagged = {r: n for r, n in report.flagged.items() if r not in ("duplicate_stamp", "out_of_order_stamp")}
+        for reason, n in {**report.dropped, **flagged}.items():
             record.count(topic, reason, n)
     table = calibrate(record, instrument, args.method)
+    if not table.extra["determined"]:
+        raise UndeterminedError("star_tracker, grs1, grs2", "the data do not determine every parameter "
+                                f"(scale-factor updates {table.extra['samples']['scale_factor_updates']}, "
+                                f"c.m.-offset updates {table.extra['samples']['com_offset_updates']})")
     elapsed = time.perf_counter() - started
     duration_s = float(record.t_s[-1] - record.t_s[0]) if record.t_s.size > 1 else 0.0
     table.extra.update({"bag": str(args.bag), "nominal_model": args.config or args.layout,
@@ -76,6 +105,9 @@ def main(args: argparse.Namespace) -> int:
     if corrections is not None:
         print("known effects of the layout: " + "; ".join(f"{k.replace('_', ' ')}: {', '.join(v)}"
                                                         for k, v in corrections.items() if v))
+    print(f"star tracker read {1e3 * table.extra['star_tracker_offset_s']:.1f} ms after the GRS instants "
+          "(modelled); median stamp phases: " + ", ".join(f"{s} {1e3 * v:.1f} ms"
+                                                       for s, v in table.extra["stream_phase_s"].items()))
     rejected = table.extra["rejected"]
     if rejected:
         print("rejected: " + "; ".join(f"{s}: " + ", ".join(f"{r} {n}" for r, n in v.items())
@@ -83,9 +115,6 @@ def main(args: argparse.Namespace) -> int:
     if table.extra["missing"]:
         print("missing (grid samples without a message): "
               + ", ".join(f"{s} {n}" for s, n in table.extra["missing"].items()))
-    if not table.extra["determined"]:
-        print("warning: the data do not determine every parameter; values are NaN where undetermined",
-              file=sys.stderr)
     ratio = duration_s / max(elapsed, 1e-9)
     print(f"{duration_s:.0f} s of data calibrated in {elapsed:.2f} s ({ratio:,.0f}x real time)")
     return 0

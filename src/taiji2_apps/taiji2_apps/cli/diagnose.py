@@ -10,7 +10,12 @@ only the effects that stand on their own, and writes report.md, report.json and 
 (n, 2, 6) and ``torque_cmd_n_m`` (n, 3) on one grid, or a CCSDS packet file or directory
 (docs/interfaces.md, recognised by content). Method: docs/diagnosis.md.
 
-Exit status: 0 diagnosed, 3 insufficient data, 2 bad input (one-line error).
+The streams are assigned to epochs by the one rule of ``taiji2_estimator_pkg.epochs`` (the same as
+``taiji2 calibrate`` and the estimator nodes); gaps of up to 5 s are bridged, longer ones end a segment
+(docs/diagnosis.md, inputs).
+
+Exit status: 0 diagnosed, 3 insufficient data, 2 bad input (one-line error), 4 result cannot be
+determined (a raw stream without a usable sample: one line ``error: taiji2 diagnose: <stream>: <reason>``).
 """
 
 from __future__ import annotations
@@ -23,6 +28,8 @@ from pathlib import Path
 from typing import Any
 
 _INSUFFICIENT = 3
+#: exit status of a result the data cannot determine (as ``taiji2 calibrate``)
+_UNDETERMINED = 4
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -92,6 +99,16 @@ def _share(value: float | None) -> str:
 
 def main(args: argparse.Namespace) -> int:
     """Run the diagnosis; returns the exit status."""
+    from taiji2_estimator_pkg.epochs import UndeterminedError
+
+    try:
+        return _main(args)
+    except UndeterminedError as exc:
+        print(f"error: taiji2 diagnose: {exc}", file=sys.stderr)
+        return _UNDETERMINED
+
+
+def _main(args: argparse.Namespace) -> int:
     from taiji2_runtime.threads import limit_blas_threads
 
     limit_blas_threads()  # before any BLAS work: one BLAS thread (docs/threads.md)
@@ -129,7 +146,8 @@ def main(args: argparse.Namespace) -> int:
 
         inp = _load_bag(path, config.sample_rate_hz, time_correlation_from(args.time_correlation))
     rejected = sum(inp.rejected.values())
-    progress(f"{inp.n} samples on the grid ({inp.duration_s:.0f} s), {rejected} rejected {inp.rejected or ''}")
+    progress(f"{inp.n} samples on the grid ({inp.duration_s:.0f} s), {rejected} rejected {inp.rejected or ''}"
+             + (f", bridged (gaps <= 5 s) {inp.bridged}" if inp.bridged else ""))
     result = diagnose(inp, config, options, progress)
     files = write_report(result, args.out, plots=not args.no_plots)
     progress(f"wrote {', '.join(str(p) for p in files.values())}")

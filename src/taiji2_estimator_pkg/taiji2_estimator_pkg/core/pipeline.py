@@ -8,7 +8,7 @@ quaternions (n, 4) and the GRS voltages (n, n_grs, 6) on a common stamp column.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -62,7 +62,7 @@ def calibrate(t_s: ArrayLike, quat_xyzw: ArrayLike, voltages_v: ArrayLike, instr
               grs_ids: Sequence[int] = (1, 2), method: str = "gls",
               scale_factor_options: ScaleFactorOptions | PaperScaleFactorOptions | None = None,
               com_offset_options: ComOffsetOptions | PaperComOffsetOptions | None = None,
-              use_rate_estimate: bool | None = None) -> CalibrationResult:
+              use_rate_estimate: bool | None = None, star_tracker_offset_s: float = 0.0) -> CalibrationResult:
     """Calibrate G and d from one record in bulk.
 
     Parameters
@@ -86,6 +86,12 @@ def calibrate(t_s: ArrayLike, quat_xyzw: ArrayLike, voltages_v: ArrayLike, instr
         term). None: as the c.m.-offset node does by default (its parameter ``use_rate_estimate``, false),
         so that the offline estimate of a recording is the live node's computation on the same data (the
         24-h deep_space graph: 0.036 sigma of d apart with the rate, 1.2e-8 sigma without; docs/link.md).
+    star_tracker_offset_s : float
+        Time of every star-tracker readout after the stamp column's instant of its row [s] (the
+        star tracker's constant offset, :mod:`taiji2_estimator_pkg.epochs`). ``gls``: the attitude is
+        modelled at ``t + tau`` (:class:`~.scale_factor_model.ScaleFactorModel`); it overrides the
+        value in ``scale_factor_options``. ``paper``: not modelled (its smoothing derivative takes the
+        readouts at the rows' instants).
 
     Returns
     -------
@@ -93,7 +99,9 @@ def calibrate(t_s: ArrayLike, quat_xyzw: ArrayLike, voltages_v: ArrayLike, instr
     """
     t = np.asarray(t_s, dtype=np.float64)
     if method == "gls":
-        sf = ScaleFactorEstimator(instrument, grs_ids, scale_factor_options)  # type: ignore[arg-type]
+        options = replace(scale_factor_options or ScaleFactorOptions(),  # type: ignore[type-var]
+                          star_tracker_offset_s=float(star_tracker_offset_s))
+        sf = ScaleFactorEstimator(instrument, grs_ids, options)
         g = sf.process_batch(t, quat_xyzw, voltages_v, want_rates=True)
         if use_rate_estimate is None:
             use_rate_estimate = bool(NODE_DEFAULTS["com_offset_estimator"]["use_rate_estimate"])

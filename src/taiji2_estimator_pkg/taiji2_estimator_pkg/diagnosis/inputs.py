@@ -1,15 +1,27 @@
-"""Raw-data input of the diagnosis: one regular sample grid, validated, with counted rejections.
+"""Raw-data input of the diagnosis: the streams on their epochs, validated, with counted rejections.
 
 The diagnosis works on plain arrays that follow the raw-data contract (``interfaces.md``): star-
 tracker attitude, the six electrode voltages of both GRS and the commanded torque, on the 10 Hz
-sample grid. :func:`align_streams` builds that grid from separately stamped streams (as a bag
-gives them); :func:`prepare_input` checks arrays that are already on one grid. Bad samples are
-dropped and counted by reason; the diagnosis then uses the longest gap-free run (its equations
-difference consecutive samples), and reports how many samples that left out.
+sample grid. :func:`align_streams` (separately stamped streams, as a bag gives them) and
+:func:`prepare_input` (arrays already on one grid, e.g. an ``.npz``) both assign the samples to epochs
+by the one rule of :mod:`taiji2_estimator_pkg.epochs` (the same as ``taiji2 calibrate`` and the
+estimator nodes: GRS instants, each stream at its own constant offset, counted reasons).
 
-Reasons: ``nan_or_inf``, ``non_unit_quaternion``, ``duplicate_stamp``, ``out_of_order_stamp``,
-``off_grid_stamp``, ``unmatched`` (a stamp present in one sensor stream only), ``outside_run``
-(valid samples outside the longest gap-free run).
+Gaps. The diagnosis's channels difference consecutive samples and its fits are spectral (one
+contiguous grid), so a gap cannot simply be left empty. A gap of a stream of at most
+:data:`MAX_BRIDGE_SAMPLES` samples (5 s at 10 Hz: lost packets and their bursts) with samples on both
+sides is *bridged* (:func:`_bridge_all`), counted per stream in ``bridged``, and used: the attitude
+along the rotation between its neighbours (over 5 s at most ``|omega_dot| T^2 / 8 = 5e-9 x 25 / 8 =
+1.6e-8 rad`` from the true attitude with the nominal maneuvers, 1/60 of the star tracker's noise); a
+GRS from the other GRS where it has the sample, else from the command's step and its neighbours. A
+bridged sample carries no noise of its own, so the diagnosis's noise estimates are slightly low where
+many are bridged (its report gives ``inputs.bridged``). A longer gap ends a segment; the diagnosis
+uses the longest segment and counts the valid samples outside it as ``outside_run``.
+
+Reasons: those of the epoch rule (``duplicate_stamp``, ``off_grid_stamp``, ``before_start``,
+``duplicate_epoch``; a bulk read sorts each stream, so no ``out_of_order_stamp``), ``nan_or_inf``,
+``non_unit_quaternion``, ``unmatched`` (an epoch of the segment edges held by some streams only),
+``outside_run`` (valid epochs outside the longest segment), summed over the streams.
 """
 
 from __future__ import annotations
@@ -20,10 +32,17 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["DiagnosisInput", "InputError", "align_streams", "commands_on_grid", "prepare_input"]
+from taiji2_estimator_pkg.core.attitude import quat_conjugate, quat_multiply, rotvec_from_quat
+from taiji2_estimator_pkg.epochs import GRID_TOLERANCE, UndeterminedError, circular_offset, grid_streams
+
+__all__ = ["MAX_BRIDGE_SAMPLES", "DiagnosisInput", "InputError", "align_streams", "commands_on_grid",
+           "prepare_input"]
 
 _QUAT_NORM_TOL = 1e-6  # accepted | |q| - 1 | (renormalised inside)
-_GRID_TOL = 0.25  # accepted stamp deviation from the grid, fraction of 1/fs
+_GRID_TOL = GRID_TOLERANCE  # accepted stamp deviation from the grid, fraction of 1/fs (the epoch rule's)
+#: longest gap of a stream bridged [samples] (5 s at 10 Hz)
+MAX_BRIDGE_SAMPLES = 50
+_STREAMS = ("star_tracker", "grs1", "grs2")
 
 
 class InputError(ValueError):
@@ -50,9 +69,11 @@ class DiagnosisInput:
     rejected : dict of str to int
         Samples dropped, by reason.
     stamp_phase_s : dict of str to float
-        Constant sub-step phase of the GRS and command stamps against the star-tracker grid [s],
-        removed when the streams were put on the grid (:func:`align_streams`); a timing convention
-        the diagnosis adds to its nominal model.
+        Constant sub-step phase of the GRS and command stamps against the star-tracker instants
+        ``t_s`` [s] (the epoch rule keeps each stream's own offset; :func:`align_streams`); a timing
+        convention the diagnosis adds to its nominal model.
+    bridged : dict of str to int
+        Per stream: samples interpolated across gaps of at most :data:`MAX_BRIDGE_SAMPLES`.
     """
 
     t_s: np.ndarray
@@ -62,6 +83,7 @@ class DiagnosisInput:
     sample_rate_hz: float
     rejected: dict[str, int] = field(default_factory=dict)
     stamp_phase_s: dict[str, float] = field(default_factory=lambda: {"grs": 0.0, "command": 0.0})
+    bridged: dict[str, int] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -82,7 +104,8 @@ class DiagnosisInput:
         """Samples ``start:stop`` (same rejection counts)."""
         window = slice(start, stop)
         return DiagnosisInput(self.t_s[window], self.st_quat_xyzw[window], self.voltages_v[window],
-                              self.torque_cmd_n_m[window], self.sample_rate_hz, dict(self.rejected))
+                              self.torque_cmd_n_m[window], self.sample_rate_hz, dict(self.rejected),
+                              dict(self.stamp_phase_s), dict(self.bridged))
 
 
 def _array(name: str, value: ArrayLike, shape_tail: tuple[int, ...]) -> np.ndarray:
@@ -107,27 +130,176 @@ def _longest_run(valid: np.ndarray) -> tuple[int, int]:
     return int(starts[best]), int(stops[best])
 
 
-def _finish(t: np.ndarray, q: np.ndarray, v: np.ndarray, tau: np.ndarray, valid: np.ndarray, fs: float,
-            counts: Counter, stamp_phase_s: dict[str, float] | None = None) -> DiagnosisInput:
+def _rotvec_to_quat(rotvec: np.ndarray) -> np.ndarray:
+    """(..., 4) xyzw unit quaternions of (..., 3) rotation vectors [rad]."""
+    angle = np.linalg.norm(rotvec, axis=-1, keepdims=True)
+    half = 0.5 * angle
+    scale = np.where(angle > 0.0, np.sin(half) / np.where(angle > 0.0, angle, 1.0), 0.5)
+    return np.concatenate((rotvec * scale, np.cos(half)), axis=-1)
+
+
+def _command_response(values: np.ndarray, present: np.ndarray, torque: np.ndarray) -> np.ndarray:
+    """(3, k) least-squares response of the rows to the commanded torque, from consecutive present pairs.
+
+    ``values[j] - values[j-1] = (torque[j] - torque[j-1]) @ B``: the steps of the maneuver, fitted on
+    differences so that slow drifts do not enter. Zero when the torque never changes.
+    """
+    pair = present[1:] & present[:-1]
+    d_torque = np.diff(torque, axis=0)[pair]
+    d_values = np.diff(values, axis=0)[pair]
+    moving = np.any(d_torque != 0.0, axis=1)
+    if not np.any(moving):
+        return np.zeros((3, values.shape[1]))
+    response, *_ = np.linalg.lstsq(d_torque[moving], d_values[moving], rcond=None)
+    return response
+
+
+def _bridge(values: np.ndarray, present: np.ndarray, quaternion: bool, torque: np.ndarray | None = None) -> int:
+    """Interpolate, in place, gaps of at most MAX_BRIDGE_SAMPLES rows between present rows; returns rows filled.
+
+    Quaternions: along the rotation from the sample before to the sample after (``q_a exp(s log(q_a^* q_b))``).
+    Other rows (GRS voltages): the part the commanded ``torque`` explains (:func:`_command_response`, so that a
+    maneuver step inside a gap stays a step) plus the rest interpolated linearly. ``present`` is updated.
+    """
+    if torque is not None and not quaternion:
+        response = _command_response(values, present, torque)
+        explained = torque @ response
+        rest = values - explained
+        before = present.copy()
+        filled = _bridge(rest, present, quaternion=False)
+        new = present & ~before
+        values[new] = rest[new] + explained[new]  # the samples received stay bit for bit
+        return filled
+    padded = np.concatenate(([True], present, [True])).astype(np.int8)
+    edges = np.flatnonzero(np.diff(padded))
+    starts, stops = edges[0::2], edges[1::2]  # [start, stop) of the runs of missing rows
+    filled = 0
+    for start, stop in zip(starts, stops, strict=True):
+        if start == 0 or stop == present.size or stop - start > MAX_BRIDGE_SAMPLES:
+            continue
+        a, b = values[start - 1], values[stop]
+        s = (np.arange(start, stop) - (start - 1)) / (stop - (start - 1))
+        if quaternion:
+            rotation = rotvec_from_quat(quat_multiply(quat_conjugate(a), b))
+            values[start:stop] = quat_multiply(a[None], _rotvec_to_quat(s[:, None] * rotation[None]))
+        else:
+            values[start:stop] = a + s.reshape(-1, *([1] * a.ndim)) * (b - a)
+        present[start:stop] = True
+        filled += stop - start
+    return filled
+
+
+def _phase_steps(t_s: np.ndarray, t0_s: float, dt: float) -> float:
+    """Circular median offset of stamps from the grid t0 + j dt, in steps, in [-0.5, 0.5)."""
+    if not t_s.size:
+        return 0.0
+    offsets = np.rint((t_s - t0_s) * 1e9).astype(np.int64)
+    return circular_offset(offsets, round(dt * 1e9)) / (dt * 1e9)
+
+
+def _on_epochs(streams: dict[str, tuple[np.ndarray, np.ndarray]], fs: float, counts: Counter
+               ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray], float]:
+    """The epoch rule on the three streams; returns (star-tracker instants [s], values and presence on the
+    epochs per stream, GRS phase against the star tracker [s])."""
+    gridded = grid_streams({name: (np.rint(t * 1e9).astype(np.int64), x) for name, (t, x) in streams.items()},
+                           1.0 / fs)
+    for name in _STREAMS:
+        refused = gridded.refused.get(name, {})
+        for reason, n in refused.items():
+            counts[reason] += n
+        if gridded.n == 0 or not gridded.index[name].size:
+            why = ("every sample refused (" + ", ".join(f"{r} {n}" for r, n in refused.items()) + ")"
+                   if refused else "no valid sample")
+            raise UndeterminedError(name, why)
+    values = {name: gridded.on_grid(name, fill=0.0) for name in _STREAMS}
+    present = {name: gridded.present(name) for name in _STREAMS}
+    # the diagnosis's grid is the star tracker's instants: the GRS are stamped -offset against it
+    grid = (gridded.t_ns + gridded.slot_ns["star_tracker"]) / 1e9
+    return grid, values, present, -gridded.offset_s("star_tracker")
+
+
+def _bridge_all(values: dict[str, np.ndarray], present: dict[str, np.ndarray], torque: np.ndarray) -> dict[str, int]:
+    """Bridge the short gaps of every stream in place; returns the samples filled per stream.
+
+    The star tracker along the rotation between its neighbours. The GRS: the spacecraft's common angular
+    and linear acceleration (thruster noise, ~30 times a GRS's own noise) must cancel in the differences
+    of the two GRS as it does in the data, which a fill from a sample's own neighbours would not give. So a
+    GRS1 sample missing where GRS2 has one is taken from GRS2 through the least-squares linear map
+    between the two GRS's voltages and the command (fitted on the epochs both hold) plus the interpolated
+    rest (their own noise); where both are missing, GRS1 from the command's step and its neighbours
+    (:func:`_bridge`) and GRS2 from that GRS1 through the map, so their difference is again the rest alone.
+    """
+    bridged = {}
+    n = _bridge(values["star_tracker"], present["star_tracker"], quaternion=True)
+    if n:
+        bridged["star_tracker"] = n
+    received = {g: present[g].copy() for g in ("grs1", "grs2")}
+    own = {}  # each GRS from the command's step and its neighbours: the fallback, and the map's regressors
+    for g in received:
+        own[g] = values[g].copy()
+        own[g + "_present"] = received[g].copy()
+        _bridge(own[g], own[g + "_present"], quaternion=False, torque=torque)
+    both = received["grs1"] & received["grs2"]
+    for g, o, source in (("grs1", "grs2", received["grs2"]), ("grs2", "grs1", own["grs1_present"])):
+        from_other = own[g + "_present"] & ~received[g] & source
+        if np.count_nonzero(both) > 20 and np.any(from_other):
+            regressors = np.column_stack((own[o], torque))
+            pair = both[1:] & both[:-1]
+            slope, *_ = np.linalg.lstsq(np.diff(regressors, axis=0)[pair], np.diff(values[g], axis=0)[pair],
+                                        rcond=None)
+            mapped = regressors @ slope
+            # what the map leaves (the two GRS's own noise), known where both have a sample, interpolated between
+            rest = np.where(both[:, None], values[g] - mapped, 0.0)
+            rest_present = both.copy()
+            _bridge(rest, rest_present, quaternion=False)
+            from_other &= rest_present
+            own[g][from_other] = (mapped + rest)[from_other]
+    for g in received:
+        values[g][:] = own[g]
+        present[g][:] = own[g + "_present"]
+        n = int(np.count_nonzero(present[g] & ~received[g]))
+        if n:
+            bridged[g] = n
+    return bridged
+
+
+def _finish(grid: np.ndarray, values: dict[str, np.ndarray], present: dict[str, np.ndarray], tau: np.ndarray,
+            fs: float, counts: Counter, bridged: dict[str, int], stamp_phase_s: dict[str, float]) -> DiagnosisInput:
+    """The longest segment of epochs holding every stream (after bridging); the rest counted."""
+    valid = present["star_tracker"] & present["grs1"] & present["grs2"]
+    partial = (present["star_tracker"] | present["grs1"] | present["grs2"]) & ~valid
+    counts["unmatched"] += int(np.count_nonzero(partial))
     start, stop = _longest_run(valid)
     outside = int(np.count_nonzero(valid)) - (stop - start)
     if outside:
         counts["outside_run"] += outside
-    q = q[start:stop].copy()
+    q = values["star_tracker"][start:stop].copy()
     if q.shape[0]:
         q /= np.linalg.norm(q, axis=1, keepdims=True)
         # q and -q are the same attitude: keep one hemisphere along the run
         flips = np.sum(q[1:] * q[:-1], axis=1) < 0.0
         sign = np.concatenate(([1.0], np.where(np.cumsum(flips) % 2 == 1, -1.0, 1.0)))
         q *= sign[:, None]
-    return DiagnosisInput(t[start:stop].copy(), q, v[start:stop].copy(), tau[start:stop].copy(), fs,
-                          {key: int(value) for key, value in counts.items() if value},
-                          dict(stamp_phase_s or {"grs": 0.0, "command": 0.0}))
+    voltages = np.stack((values["grs1"], values["grs2"]), axis=1)[start:stop].copy()
+    return DiagnosisInput(grid[start:stop].copy(), q, voltages, np.asarray(tau)[start:stop].copy(), fs,
+                          {key: int(value) for key, value in counts.items() if value}, dict(stamp_phase_s),
+                          dict(bridged))
+
+
+def _valid_rows(name: str, t: np.ndarray, x: np.ndarray, counts: Counter) -> np.ndarray:
+    """Rows with a finite stamp and finite values (and a unit quaternion), the others counted."""
+    good = np.isfinite(t) & np.all(np.isfinite(x.reshape(x.shape[0], -1)), axis=1)
+    counts["nan_or_inf"] += int(np.count_nonzero(~good))
+    if x.shape[1:] == (4,):
+        unit = np.abs(np.linalg.norm(np.where(good[:, None], x, 0.0), axis=1) - 1.0) <= _QUAT_NORM_TOL
+        counts["non_unit_quaternion"] += int(np.count_nonzero(good & ~unit))
+        good &= unit
+    return good
 
 
 def prepare_input(t_s: ArrayLike, st_quat_xyzw: ArrayLike, voltages_v: ArrayLike, torque_cmd_n_m: ArrayLike,
                   sample_rate_hz: float = 10.0) -> DiagnosisInput:
-    """Validate arrays already on one sample grid.
+    """Validate arrays already on one sample grid (the epoch rule, every stream stamped ``t_s``).
 
     Parameters
     ----------
@@ -145,12 +317,15 @@ def prepare_input(t_s: ArrayLike, st_quat_xyzw: ArrayLike, voltages_v: ArrayLike
     Returns
     -------
     DiagnosisInput
-        The longest gap-free run of valid samples; rejections counted.
+        A bad value removes that stream's sample only (a gap, bridged if short); the longest
+        segment; rejections counted.
 
     Raises
     ------
     InputError
         Wrong shapes or lengths, non-positive rate.
+    UndeterminedError
+        A stream without a single valid sample.
     """
     if not (isinstance(sample_rate_hz, int | float) and np.isfinite(sample_rate_hz) and sample_rate_hz > 0):
         raise InputError(f"sample_rate_hz: must be a positive number, got {sample_rate_hz!r}")
@@ -164,48 +339,17 @@ def prepare_input(t_s: ArrayLike, st_quat_xyzw: ArrayLike, voltages_v: ArrayLike
         if array.shape[0] != n:
             raise InputError(f"{name}: {array.shape[0]} samples, but t_s has {n}")
     counts: Counter = Counter()
-    finite = (np.isfinite(t) & np.all(np.isfinite(q), axis=1) & np.all(np.isfinite(v), axis=(1, 2))
-              & np.all(np.isfinite(tau), axis=1))
-    counts["nan_or_inf"] += int(np.count_nonzero(~finite))
-    norm = np.linalg.norm(np.where(np.isfinite(q), q, 0.0), axis=1)
-    unit = np.abs(norm - 1.0) <= _QUAT_NORM_TOL
-    counts["non_unit_quaternion"] += int(np.count_nonzero(finite & ~unit))
-    valid = finite & unit
-    # the grid: t_0 + j dt; a sample off the grid, or out of order, breaks the run
-    dt = 1.0 / fs
-    if np.any(valid):
-        t0 = t[np.flatnonzero(valid)[0]]
-        position = (t - t0) / dt
-        index = np.rint(position)
-        off = valid & (np.abs(position - index) > _GRID_TOL)
-        counts["off_grid_stamp"] += int(np.count_nonzero(off))
-        valid &= ~off
-        previous = -np.inf
-        order = np.ones(n, dtype=bool)
-        for j in np.flatnonzero(valid):  # sequential: duplicates and disorder relative to the last kept
-            if index[j] == previous:
-                counts["duplicate_stamp"] += 1
-                order[j] = False
-            elif index[j] < previous:
-                counts["out_of_order_stamp"] += 1
-                order[j] = False
-            else:
-                previous = index[j]
-        valid &= order
-        # consecutive kept samples must be one step apart, else the run is cut there
-        kept = np.flatnonzero(valid)
-        if kept.size:
-            step = np.diff(index[kept])
-            breaks = np.flatnonzero(step != 1.0)
-            contiguous = np.zeros(n, dtype=bool)
-            segments = np.split(kept, breaks + 1)
-            best = max(segments, key=len)
-            contiguous[best] = True
-            outside = int(np.count_nonzero(valid & ~contiguous))
-            if outside:
-                counts["outside_run"] += outside
-            valid = contiguous
-    return _finish(t, q, v, tau, valid, fs, counts)
+    streams = {}
+    for name, x in (("star_tracker", q), ("grs1", v[:, 0]), ("grs2", v[:, 1])):
+        good = _valid_rows(name, t, x, counts)
+        streams[name] = (t[good], x[good])
+    grid, values, present, phase_grs = _on_epochs(streams, fs, counts)
+    # the command rows as stamped: the one in force at each epoch (by stamp; rows with a bad torque left out)
+    good = np.isfinite(t) & np.all(np.isfinite(tau), axis=1)
+    counts["nan_or_inf"] += int(np.count_nonzero(~good))
+    held = commands_on_grid(t[good] - 1.0 / fs, tau[good], grid, fs)
+    bridged = _bridge_all(values, present, held)
+    return _finish(grid, values, present, held, fs, counts, bridged, {"grs": phase_grs, "command": 0.0})
 
 
 def commands_on_grid(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, sample_t_s: ArrayLike,
@@ -251,13 +395,15 @@ def commands_on_grid(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, samp
 def align_streams(st_t_s: ArrayLike, st_quat_xyzw: ArrayLike, grs1_t_s: ArrayLike, grs1_voltages_v: ArrayLike,
                   grs2_t_s: ArrayLike, grs2_voltages_v: ArrayLike, command_t_s: ArrayLike,
                   command_torque_n_m: ArrayLike, sample_rate_hz: float = 10.0) -> DiagnosisInput:
-    """Put separately stamped streams on one grid (what a bag gives).
+    """Put separately stamped streams on their epochs by the one rule (what a bag gives).
 
-    The grid is that of the star tracker (t_0 its first valid stamp). The GRS and command streams
-    may be stamped at a constant sub-step phase against it (their own timing convention): each
-    stream's phase (the median of its stamps' offsets from the grid) is removed before a sample is
-    put on the grid point within a quarter step of its stamp, and reported in
-    ``stamp_phase_s`` (the GRS phase as the mean of the two). Grid points lacking any sensor are gaps.
+    The epochs are the GRS instants; each stream keeps its own constant offset
+    (:mod:`taiji2_estimator_pkg.epochs`). The diagnosis's grid ``t_s`` is the star tracker's
+    instants (the epochs shifted by its offset): the GRS phase against it, and the commands' (the
+    circular median of their stamps' offsets from the grid), are reported in ``stamp_phase_s``,
+    which the diagnosis adds to its model's timing. Gaps of a stream up to
+    :data:`MAX_BRIDGE_SAMPLES` are bridged (module docstring); each stream is sorted by stamp first,
+    so samples played back out of order are used.
 
     Parameters
     ----------
@@ -277,75 +423,26 @@ def align_streams(st_t_s: ArrayLike, st_quat_xyzw: ArrayLike, grs1_t_s: ArrayLik
     Raises
     ------
     InputError
-        Malformed arrays, or a stream without a single valid sample.
+        Malformed arrays.
+    UndeterminedError
+        A stream without a single valid sample on an epoch.
     """
     fs = float(sample_rate_hz)
     dt = 1.0 / fs
     counts: Counter = Counter()
-
-    def clean(name: str, t_raw: ArrayLike, x_raw: ArrayLike, tail: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    streams = {}
+    for name, t_raw, x_raw, tail in (("star_tracker", st_t_s, st_quat_xyzw, (4,)),
+                                     ("grs1", grs1_t_s, grs1_voltages_v, (6,)),
+                                     ("grs2", grs2_t_s, grs2_voltages_v, (6,))):
         t = _array(f"{name} stamps", t_raw, ())
         x = _array(name, x_raw, tail)
         if x.shape[0] != t.shape[0]:
             raise InputError(f"{name}: {x.shape[0]} samples but {t.shape[0]} stamps")
-        good = np.isfinite(t) & np.all(np.isfinite(x.reshape(x.shape[0], -1)), axis=1)
-        counts["nan_or_inf"] += int(np.count_nonzero(~good))
-        if tail == (4,):
-            unit = np.abs(np.linalg.norm(np.where(good[:, None], x, 0.0), axis=1) - 1.0) <= _QUAT_NORM_TOL
-            counts["non_unit_quaternion"] += int(np.count_nonzero(good & ~unit))
-            good &= unit
-        t, x = t[good], x[good]
-        if t.size == 0:
-            raise InputError(f"{name}: no valid sample")
-        return t, x
-
-    st_t, st_q = clean("star tracker", st_t_s, st_quat_xyzw, (4,))
-    g1_t, g1_v = clean("grs1", grs1_t_s, grs1_voltages_v, (6,))
-    g2_t, g2_v = clean("grs2", grs2_t_s, grs2_voltages_v, (6,))
-    t0 = float(st_t[0])
-    last = max(float(st_t.max()), float(g1_t.max()), float(g2_t.max()))
-    n = int(np.floor((last - t0) / dt + _GRID_TOL)) + 1
-
-    def phase(t: np.ndarray) -> float:
-        """Median offset of the stamps from the grid, in steps, in [-0.5, 0.5)."""
-        offset = (t - t0) / dt
-        return float(np.median((offset - np.rint(offset) + 0.5) % 1.0 - 0.5)) if t.size else 0.0
-
-    phase_g1, phase_g2 = phase(g1_t), phase(g2_t)
-    g1_t, g2_t = g1_t - phase_g1 * dt, g2_t - phase_g2 * dt
-
-    def place(name: str, t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        position = (t - t0) / dt
-        index = np.rint(position).astype(np.int64)
-        on_grid = (np.abs(position - index) <= _GRID_TOL) & (index >= 0) & (index < n)
-        counts["off_grid_stamp"] += int(np.count_nonzero(~on_grid))
-        filled = np.zeros(n, dtype=bool)
-        out = np.zeros((n, *x.shape[1:]))
-        previous = -1
-        for j in np.flatnonzero(on_grid):  # stream order: duplicates and disorder are rejected
-            k = index[j]
-            if k == previous or filled[k]:
-                counts["duplicate_stamp" if k == previous else "out_of_order_stamp"] += 1
-                continue
-            if k < previous:
-                counts["out_of_order_stamp"] += 1
-                continue
-            filled[k] = True
-            out[k] = x[j]
-            previous = k
-        return filled, out
-
-    st_ok, q = place("star tracker", st_t, st_q)
-    g1_ok, v1 = place("grs1", g1_t, g1_v)
-    g2_ok, v2 = place("grs2", g2_t, g2_v)
-    present = st_ok | g1_ok | g2_ok
-    valid = st_ok & g1_ok & g2_ok
-    counts["unmatched"] += int(np.count_nonzero(present & ~valid))
-    grid = t0 + dt * np.arange(n)
+        good = _valid_rows(name, t, x, counts)
+        streams[name] = (t[good], x[good])
+    grid, values, present, phase_grs = _on_epochs(streams, fs, counts)
     command_t = np.asarray(command_t_s, dtype=np.float64)
-    finite = command_t[np.isfinite(command_t)]
-    phase_c = phase(finite)
+    phase_c = _phase_steps(command_t[np.isfinite(command_t)], float(grid[0]), dt)
     tau = commands_on_grid(command_t - phase_c * dt, command_torque_n_m, grid, fs)
-    voltages = np.stack((v1, v2), axis=1)
-    return _finish(grid, q, voltages, tau, valid, fs, counts,
-                   {"grs": 0.5 * (phase_g1 + phase_g2) * dt, "command": phase_c * dt})
+    bridged = _bridge_all(values, present, tau)
+    return _finish(grid, values, present, tau, fs, counts, bridged, {"grs": phase_grs, "command": phase_c * dt})

@@ -1,6 +1,7 @@
 """scale_factor_estimator: running estimates of the angular scale factors of both GRS.
 
-Subscribes to the raw star-tracker and GRS voltage topics only, aligns them into epochs by stamp,
+Subscribes to the raw star-tracker and GRS voltage topics only, puts them into epochs by the one rule of
+:mod:`taiji2_estimator_pkg.epochs` (the star tracker at its own constant offset from the GRS, modelled),
 feeds :mod:`taiji2_estimator_pkg.core.scale_factor` (``method: gls`` the default two-stage filter
 with honest covariance, or ``method: paper``), and publishes per GRS
 ``/taiji2/estimates/grsN/scale_factors`` (with the cross-covariance of the joint estimate), the
@@ -12,6 +13,7 @@ Parameters: ``config/estimators.yaml``.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -35,11 +37,17 @@ GRS_IDS = (1, 2)
 STREAMS = ("star_tracker", "grs1", "grs2")
 
 
-def make_scale_factor_estimator(instrument: Any, params: dict[str, Any]) -> Any:
-    """The core estimator for ``params["method"]`` (both GRS jointly)."""
+def make_scale_factor_estimator(instrument: Any, params: dict[str, Any], star_tracker_offset_s: float = 0.0) -> Any:
+    """The core estimator for ``params["method"]`` (both GRS jointly).
+
+    ``star_tracker_offset_s``: time of each star-tracker readout after its epoch's GRS instant [s]
+    (:meth:`taiji2_estimator_pkg.epochs.EpochAssembler.offset_s`), modelled by ``gls``; the paper's
+    method takes the readouts at the epoch instants.
+    """
     if params["method"] == "paper":
         return PaperScaleFactorFilter(instrument, GRS_IDS, paper_scale_factor_options(params))
-    return ScaleFactorEstimator(instrument, GRS_IDS, scale_factor_options(params))
+    return ScaleFactorEstimator(instrument, GRS_IDS, replace(scale_factor_options(params),
+                                                             star_tracker_offset_s=float(star_tracker_offset_s)))
 
 
 class ScaleFactorEstimatorNode(common.EstimatorNode):
@@ -48,6 +56,9 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("scale_factor_estimator", **node_kwargs)
         self.estimator = make_scale_factor_estimator(self.instrument, self.p)
+        #: the star tracker's offset the estimator models [s], fixed at the first epoch holding a readout
+        self.star_tracker_offset_s = 0.0
+        self._offset_fixed = False
         self.last_nis = float("nan")
         resumed = self.resume()
 
@@ -76,10 +87,32 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
 
     # -- checkpoints ---------------------------------------------------------------------------
     def _checkpoint_payload(self) -> dict[str, Any]:
-        return {"estimator": self.estimator.state_dict()}
+        return {"estimator": self.estimator.state_dict(), "star_tracker_offset_s": self.star_tracker_offset_s}
 
     def _restore_payload(self, state: dict[str, Any]) -> None:
+        if "star_tracker_offset_s" in state:
+            self.star_tracker_offset_s = float(state["star_tracker_offset_s"])
+            self._offset_fixed = True
+            self.estimator = make_scale_factor_estimator(self.instrument, self.p, self.star_tracker_offset_s)
         self.estimator.load_state_dict(state["estimator"])
+
+    def _fix_star_tracker_offset(self) -> None:
+        """Model the star tracker's offset from the GRS instants (the epoch rule's slot), before its first readout.
+
+        The estimator is rebuilt with it if it has not taken an epoch yet. A star tracker heard only after the
+        estimator started (epochs of the GRS alone first) keeps the offset it was built with, and this is logged.
+        """
+        self._offset_fixed = True
+        offset = self.assembler.offset_s("star_tracker")
+        if offset == self.star_tracker_offset_s or self.p["method"] == "paper":
+            return
+        if self.last_t_ns < 0:
+            self.estimator = make_scale_factor_estimator(self.instrument, self.p, offset)
+            self.star_tracker_offset_s = offset
+            self.get_logger().info(f"star tracker read {offset * 1e3:.1f} ms after the GRS instants: modelled")
+        else:
+            self.get_logger().warn(f"star tracker read {offset * 1e3:.1f} ms after the GRS instants, heard after the "
+                                   f"estimator started: {self.star_tracker_offset_s * 1e3:.1f} ms modelled")
 
     # -- input -----------------------------------------------------------------------------------
     def _on_star_tracker(self, msg: Any) -> None:
@@ -99,6 +132,8 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
         self.add_sample(f"grs{grs_id}", common.stamp_ns(msg.header), common.grs_voltages(msg))
 
     def _process(self, epoch: Any) -> None:
+        if not self._offset_fixed and "star_tracker" in epoch.samples:
+            self._fix_star_tracker_offset()
         voltages = {g: epoch.samples[f"grs{g}"] for g in GRS_IDS if f"grs{g}" in epoch.samples}
         self.last_t_ns = epoch.t_ns
         try:

@@ -69,7 +69,7 @@ class ScaleFactorEstimator:
                  options: ScaleFactorOptions | None = None) -> None:
         self.instrument = instrument
         self.options = options or ScaleFactorOptions()
-        self.model = ScaleFactorModel(instrument, grs_ids)
+        self.model = ScaleFactorModel(instrument, grs_ids, self.options.star_tracker_offset_s)
         self.grs_ids = self.model.grs_ids
         self.filter = TwoStageFilter(self.model.state_space, self.model.n_params, self.options.snap_tolerance)
         validation = self.options.validation

@@ -124,7 +124,7 @@ def input_summary(inp: DiagnosisInput) -> dict[str, Any]:
     """The report's inputs block: samples used, duration, rejections, stamp phases."""
     return {"samples": inp.n, "duration_s": inp.duration_s, "rejected": dict(inp.rejected),
             "rejected_total": int(sum(inp.rejected.values())), "t0_s": float(inp.t_s[0]) if inp.n else None,
-            "stamp_phase_s": dict(inp.stamp_phase_s)}
+            "stamp_phase_s": dict(inp.stamp_phase_s), "bridged": dict(inp.bridged)}
 
 
 def admit(inp: DiagnosisInput, model: NominalModel, options: DiagnosisOptions) -> None:
