@@ -110,7 +110,7 @@ def _sigma(cov: np.ndarray) -> np.ndarray:
 def format_table(table: EstimateTable) -> str:
     """Human-readable table in the paper's units (scale factors x1e-8, offsets in um)."""
     lines = [f"method: {table.method}"]
-    lines.append("Scale factors [1e-8 rad s^-2 V^-1]  (requirement: error <= 0.3 %)")
+    lines.append("Scale factors [1e-8 rad s^-2 V^-1]  (requirement: 1-sigma <= 0.3 %)")
     # truth columns only where a truth is known (simulation): real data have none
     g_truth = any(r.scale_factors_truth is not None for r in table.grs)
     d_truth = any(r.com_offset_truth_m is not None for r in table.grs)
@@ -126,7 +126,7 @@ def format_table(table: EstimateTable) -> str:
                 ok = "ok" if abs(rel) <= SCALE_FACTOR_REQUIREMENT_REL else "MISS"
                 row += f" {r.scale_factors_truth[k] * 1e8:9.4f} {100 * rel:8.4f} {err / sig[k]:8.2f} {ok}"
             lines.append(row)
-    lines.append("c.m. offsets d_i in CRF [um]  (requirement: error <= 100 um)")
+    lines.append("c.m. offsets d_i in CRF [um]  (requirement: 1-sigma <= 100 um)")
     lines.append(f"  {'':6} {'axis':9} {'estimate':>12} {'1-sigma':>9}"
                  + (f" {'truth':>10} {'error':>8} {'err/sig':>8} req" if d_truth else ""))
     for r in table.grs:

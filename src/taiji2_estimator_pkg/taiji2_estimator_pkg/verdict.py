@@ -122,10 +122,16 @@ class Verdict:
             worst = max(cannot, key=lambda c: c.bound if not np.isnan(c.bound) else c.sigma)
             ratio = worst.bound if not np.isnan(worst.bound) else worst.sigma
             what = ", ".join(f"{c.name} {c.bound if not np.isnan(c.bound) else c.sigma:.2f}x" for c in cannot)
-            text = (f"  cannot be met with this maneuver in {hours}: {what} (Cramer-Rao bound / requirement; "
-                    f"{worst.name}: {worst.amount(ratio)} against {worst.amount(1.0)}), so no estimator reaches them")
+            if any(not np.isnan(c.bound) for c in cannot):
+                text = (f"  cannot be met with this maneuver in {hours}: {what} (Cramer-Rao bound / requirement; "
+                        f"{worst.name}: {worst.amount(ratio)} against {worst.amount(1.0)}), so no estimator reaches "
+                        "them")
+            else:  # no bound of the flown maneuver here (a recording): the estimate's own 1-sigma says it
+                text = (f"  not met by the data of this run ({hours}): {what} (1-sigma / requirement; "
+                        f"{worst.name}: {worst.amount(ratio)} against {worst.amount(1.0)})")
             if self.maneuver_covers_run:
-                text += (f"; this maneuver needs about {self.duration_s * ratio ** 2 / 3600:.2f} h (the bound falls "
+                falls = "the bound" if not np.isnan(worst.bound) else "the 1-sigma"
+                text += (f"; this maneuver needs about {self.duration_s * ratio ** 2 / 3600:.2f} h ({falls} falls "
                          "as 1/sqrt(T))")
             out.append(text + ".")
             if self.remedy:

@@ -23,8 +23,7 @@ import json
 import sys
 import time
 
-#: exit status of a result the data cannot determine
-UNDETERMINED = 4
+from taiji2_apps.cli.exit_status import ExitStatus
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,14 +39,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """Run the calibration; returns the exit status (0, or :data:`UNDETERMINED` with one error line)."""
+    """Run the calibration; returns the exit status: 0 every requirement met, 3 not (the verdict says which and
+    how long a run of this maneuver would meet them), 4 undetermined (one error line)."""
     from taiji2_estimator_pkg.epochs import UndeterminedError
 
     try:
         return _main(args)
     except UndeterminedError as exc:
         print(f"error: taiji2 calibrate: {exc}", file=sys.stderr)
-        return UNDETERMINED
+        return ExitStatus.UNDETERMINED
 
 
 def _main(args: argparse.Namespace) -> int:
@@ -94,9 +94,11 @@ def _main(args: argparse.Namespace) -> int:
                         "duration_s": duration_s, "wall_time_s": elapsed})
     if corrections is not None:
         table.extra["known_effects"] = corrections
+    verdict = _verdict(table, duration_s)
+    status = ExitStatus.OK if verdict.all_met else ExitStatus.NOT_MET
     if args.json:
-        print(json.dumps(table.to_dict()))
-        return 0
+        print(json.dumps({**table.to_dict(), "verdict": verdict.to_dict()}))
+        return status
     for line in raw.report_lines():
         print(line)
     if raw.packets is not None:
@@ -116,5 +118,17 @@ def _main(args: argparse.Namespace) -> int:
         print("missing (grid samples without a message): "
               + ", ".join(f"{s} {n}" for s, n in table.extra["missing"].items()))
     ratio = duration_s / max(elapsed, 1e-9)
-    print(f"{duration_s:.0f} s of data calibrated in {elapsed:.2f} s ({ratio:,.0f}x real time)")
-    return 0
+    print(f"{duration_s:.0f} s of data calibrated in {elapsed:.2f} s ({ratio:,.0f}x real time)\n")
+    print("\n".join(verdict.lines()))
+    return status
+
+
+def _verdict(table: object, duration_s: float) -> object:
+    """The verdict of a recording, by the experiment's rules (:func:`taiji2_estimator_pkg.verdict.judge`) on
+    the 1-sigma alone: no truth and no bound of the flown maneuver here, so a requirement whose 1-sigma is
+    beyond it is named with the run length that would meet it (1-sigma falls as 1/sqrt(T))."""
+    from taiji2_estimator_pkg.verdict import judge
+
+    remedy = ("a longer run of this maneuver, or a designed one: taiji2 design --minimize-duration "
+              "(docs/maneuver_design.md)")
+    return judge(table, None, duration_s, "the maneuver in the data", remedy=remedy)
