@@ -27,9 +27,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+from taiji2_apps.cli.exit_status import ExitStatus
+
 _INSUFFICIENT = 3
-#: exit status of a result the data cannot determine (as ``taiji2 calibrate``)
-_UNDETERMINED = 4
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -75,7 +75,8 @@ def _load_npz(path: Path, sample_rate_hz: float) -> Any:
     return prepare_input(data["t_s"], data["st_quat_xyzw"], data["voltages_v"], data["torque_cmd_n_m"], rate)
 
 
-def _load_bag(path: Path, sample_rate_hz: float, correlation: Any = None) -> Any:
+def _load_bag(path: Path, sample_rate_hz: float, correlation: Any = None) -> tuple[Any, Any]:
+    """The diagnosis input of a bag or packets, and the raw experiment it came from."""
     from taiji2_estimator_pkg.diagnosis import align_streams
     from taiji2_ground_pkg.raw_data import load_raw_data
 
@@ -89,7 +90,18 @@ def _load_bag(path: Path, sample_rate_hz: float, correlation: Any = None) -> Any
         for reason, count in getattr(report, "dropped", {}).items():
             if count:
                 inp.rejected[f"bag_{reason}"] = inp.rejected.get(f"bag_{reason}", 0) + int(count)
-    return inp
+    return inp, raw
+
+
+def _calibration_choice(raw: Any, config: Any, torque_channel: dict[str, Any]) -> dict[str, Any]:
+    """``taiji2 calibrate``'s result on the same data beside the diagnosis's torque-channel calibration."""
+    from taiji2_estimator_pkg.calibration import align_streams, calibrate
+    from taiji2_estimator_pkg.core.instrument import InstrumentModel
+    from taiji2_estimator_pkg.diagnosis.calibration_choice import calibration_choice
+
+    grs = {gid: (raw.grs(gid).stamp_ns, raw.grs(gid).voltages_v) for gid in (1, 2)}
+    record = align_streams(raw.star_tracker.stamp_ns, raw.star_tracker.quat_xyzw, grs, config.sample_rate_hz)
+    return calibration_choice(calibrate(record, InstrumentModel.from_layout(config)), torque_channel)
 
 
 def _share(value: float | None) -> str:
@@ -105,7 +117,7 @@ def main(args: argparse.Namespace) -> int:
         return _main(args)
     except UndeterminedError as exc:
         print(f"error: taiji2 diagnose: {exc}", file=sys.stderr)
-        return _UNDETERMINED
+        return ExitStatus.UNDETERMINED
 
 
 def _main(args: argparse.Namespace) -> int:
@@ -139,17 +151,22 @@ def _main(args: argparse.Namespace) -> int:
     if not path.exists():
         raise ValueError(f"{path}: no such bag (the path does not exist)")
     progress(f"reading {path}")
+    raw = None
     if path.suffix == ".npz":
         inp = _load_npz(path, config.sample_rate_hz)
     else:
         from taiji2_ground_pkg.raw_packets import time_correlation_from
 
-        inp = _load_bag(path, config.sample_rate_hz, time_correlation_from(args.time_correlation))
+        inp, raw = _load_bag(path, config.sample_rate_hz, time_correlation_from(args.time_correlation))
     rejected = sum(inp.rejected.values())
     progress(f"{inp.n} samples on the grid ({inp.duration_s:.0f} s), {rejected} rejected {inp.rejected or ''}"
              + (f", bridged (gaps <= 5 s) {inp.bridged}" if inp.bridged else ""))
     result = diagnose(inp, config, options, progress)
-    files = write_report(result, args.out, plots=not args.no_plots)
+    choice = None
+    if raw is not None and result.status == "ok":  # the raw streams' own calibration, for the report's choice
+        progress("the star-tracker calibration (taiji2 calibrate) of the same data, for the report's choice")
+        choice = _calibration_choice(raw, config, result.calibration)
+    files = write_report(result, args.out, plots=not args.no_plots, choice=choice)
     progress(f"wrote {', '.join(str(p) for p in files.values())}")
     if args.write_config:
         import yaml
@@ -163,6 +180,9 @@ def _main(args: argparse.Namespace) -> int:
     else:
         verdict = result.verdict
         print(f"verdict: {verdict['summary']}")
+        if choice is not None:
+            print(f"  calibration to use: taiji2 calibrate's (the star tracker; the torque channel trusts the nominal "
+                  f"inertia); they differ by up to {choice['max_difference_sigma']:.1f} combined sigma (report.md)")
         for effect in result.effects:
             if effect.accepted:
                 onset = effect.parameters.get("onset_s")

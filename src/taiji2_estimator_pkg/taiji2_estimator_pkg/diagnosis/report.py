@@ -43,7 +43,20 @@ def _fmt(value: float | None, digits: int = 3) -> str:
     return f"{value:.{digits}g}"
 
 
-def _markdown(result: DiagnosisResult, files: list[str]) -> str:
+def _choice_lines(choice: dict[str, Any]) -> list[str]:
+    """The report section saying which calibration to use, the two side by side."""
+    lines = ["## Which calibration to use", "", "**Use `taiji2 calibrate`'s result** (the star-tracker method). "
+             + choice["why"], "",
+             "| GRS | parameter | `taiji2 calibrate` | 1-sigma | torque channel (trusts the nominal inertia) | 1-sigma "
+             "| difference [combined sigma] |", "|---|---|---|---|---|---|---|"]
+    for r in choice["rows"]:
+        diff = "-" if r["difference_sigma"] is None else f"{r['difference_sigma']:+.2f}"
+        lines.append(f"| {r['grs']} | {r['parameter']} | {r['calibrate']:.6g} | {r['calibrate_sigma']:.3g} | "
+                     f"{r['torque_channel']:.6g} | {r['torque_channel_sigma']:.3g} | {diff} |")
+    return [*lines, ""]
+
+
+def _markdown(result: DiagnosisResult, files: list[str], choice: dict[str, Any] | None = None) -> str:
     lines = ["# Sim-to-real gap diagnosis", ""]
     verdict = result.verdict
     lines += [f"**Verdict: {verdict.get('summary', result.status)}**", ""]
@@ -62,7 +75,12 @@ def _markdown(result: DiagnosisResult, files: list[str]) -> str:
               f"after {verdict.get('significant_locations_after')}",
               f"- nominal-model chi2/dof = {cal['chi2'] / cal['dof']:.5f} (z = {cal['chi2_z']:.2f}), fit band "
               f"<= {cal['f_max_hz']} Hz", ""]
-    lines += ["## Calibrated nominal model", "", "| GRS | G_phi | G_theta | G_psi | d_x [m] | d_y [m] | d_z [m] |",
+    if choice is not None:
+        lines += _choice_lines(choice)
+    lines += ["## Torque-channel calibration (the nominal model: commanded torque over the nominal inertia)", "",
+              "The reference of the gap search; it trusts the inertia and the thruster torque model"
+              + (" (see above for the calibration to use)." if choice is not None else "."), "",
+              "| GRS | G_phi | G_theta | G_psi | d_x [m] | d_y [m] | d_z [m] |",
               "|---|---|---|---|---|---|---|"]
     for grs in range(2):
         g = cal["g_angular"][grs]
@@ -236,7 +254,8 @@ def _plots(result: DiagnosisResult, out: Path) -> list[str]:
     return written
 
 
-def write_report(result: DiagnosisResult, out_dir: str | Path, plots: bool = True) -> dict[str, Path]:
+def write_report(result: DiagnosisResult, out_dir: str | Path, plots: bool = True,
+                 choice: dict[str, Any] | None = None) -> dict[str, Path]:
     """Write ``report.json``, ``report.md`` and the PNG plots.
 
     Parameters
@@ -247,6 +266,9 @@ def write_report(result: DiagnosisResult, out_dir: str | Path, plots: bool = Tru
         Directory (created if missing).
     plots : bool
         Also write the PNG plots.
+    choice : dict, optional
+        Which calibration to use (:func:`.calibration_choice.calibration_choice`): a report section and
+        ``calibration_to_use`` in ``report.json``.
 
     Returns
     -------
@@ -257,13 +279,16 @@ def write_report(result: DiagnosisResult, out_dir: str | Path, plots: bool = Tru
     out.mkdir(parents=True, exist_ok=True)
     files = {}
     with open(out / "report.json", "w", encoding="utf-8") as stream:
-        json.dump(result.to_json_dict(), stream, indent=1, default=_json_default, allow_nan=False)
+        data = result.to_json_dict()
+        if choice is not None:
+            data["calibration_to_use"] = choice
+        json.dump(data, stream, indent=1, default=_json_default, allow_nan=False)
     files["report.json"] = out / "report.json"
     names = ["report.json", "report.md"]
     if plots and result.status == "ok":
         for name in _plots(result, out):
             files[name] = out / name
             names.append(name)
-    (out / "report.md").write_text(_markdown(result, names), encoding="utf-8")
+    (out / "report.md").write_text(_markdown(result, names, choice), encoding="utf-8")
     files["report.md"] = out / "report.md"
     return files
