@@ -195,7 +195,7 @@ def test_diagnose_says_what_shrink_is():
 
     from taiji2_apps.cli import diagnose
 
-    assert "the part of the gap at its locations that it closes; held-out" in inspect.getsource(diagnose.main)
+    assert "the part of the gap at its locations that it closes; held-out" in inspect.getsource(diagnose._main)
 
 
 def _write_bursty_bag(path):
