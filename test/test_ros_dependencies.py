@@ -12,8 +12,8 @@ from importlib.metadata import PackageNotFoundError, packages_distributions, req
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("taiji2_msgs", "taiji2_model", "taiji2_runtime", "taiji2_sim_pkg", "taiji2_estimator_pkg", "taiji2_ground_pkg",
-            "taiji2_apps")
+PACKAGES = ("taiji2_msgs", "taiji2_model", "taiji2_runtime", "taiji2_sim_pkg", "taiji2_estimator_pkg",
+            "taiji2_ground_pkg", "taiji2_apps")
 #: the python3-* rosdep keys package.xml may use, each with the PyPI distribution it installs; checked in
 #: ros/rosdistro rosdep/python.yaml (commit 8468e88, 2026-08-22): no key exists for threadpoolctl,
 #: spacepackets, fastcrc, cyclonedds, dask, distributed or pyarrow (requirements-ros.txt has those)
