@@ -154,12 +154,14 @@ def plans():
 
 def test_the_default_maneuver_meets_every_requirement_by_its_bound_and_the_paper_preset_does_not(plans):
     """The README's main job shows success: the shipped design's full bound is within every requirement in
-    its 3 h (0.604 of the d_y requirement at most); the paper's preset is 1.48x on d_z (docs/maneuver_design.md)."""
+    its 3.59 h (0.995 of the d_y requirement at most; it keeps its peak + 3.29 sigma of the readout noise
+    inside the GRS range); the paper's preset is 1.48x on d_z in 3 h (docs/maneuver_design.md)."""
     from taiji2_apps.design.evaluate import PARAMETER_NAMES, DesignProblem, requirement_ratios
 
-    for kind, worst, name in (("design", 0.604, "grs1.d_y"), ("paper", 1.480, "grs1.d_z")):
+    for kind, worst, name, duration_s in (("design", 0.995, "grs1.d_y", 12909.0),
+                                          ("paper", 1.480, "grs1.d_z", 10800.0)):
         plan = plans[kind]
         ratios = requirement_ratios(DesignProblem(plan.config.to_dict()).bound(plan.maneuver, plan.duration_s))
-        assert plan.duration_s == 10800.0
+        assert plan.duration_s == duration_s
         assert float(np.max(ratios)) == pytest.approx(worst, abs=0.003), kind
         assert PARAMETER_NAMES[int(np.argmax(ratios))] in (name, name.replace("grs1", "grs2")), kind
