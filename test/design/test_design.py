@@ -123,9 +123,17 @@ def test_design_cli_writes_the_files_and_beats_or_matches_the_paper(tmp_path):
     assert "Search: complete" in (out / "report.md").read_text()
     for key in ("design", "paper"):
         assert list(report[key]["crlb_over_requirement"]) == list(PARAMETER_NAMES)
-    # the paper's preset is in the initial population: the design can only be better (full bounds,
-    # up to the fast bound's <= 3 % end effect in the search)
-    assert report["design"]["max_crlb_over_requirement"] <= 1.03 * report["paper"]["max_crlb_over_requirement"]
+    # the paper's preset, scaled into the constraints, is in the initial population: the design can only be
+    # better than that (full bounds, up to the fast bound's <= 3 % end effect in the search). The preset as
+    # the paper flies it leaves the range with the noise (peak 0.86 + 3.29 sigma > 1): no comparison there.
+    problem = DesignProblem("type1")
+    fam, preset = family("square"), problem.config.maneuver
+    lo, hi = np.array(fam.bounds).T
+    x0 = np.clip(fam.paper_start(preset.period_s, preset.amplitude_n_m, preset.phase_s), lo, hi)
+    inside, _, _ = project(problem, fam, x0, 500.0, Constraints())
+    assert report["design"]["max_crlb_over_requirement"] <= 1.03 * float(np.max(problem.ratios(inside, 500.0)))
+    paper_usage = np.asarray(report["paper"]["usage"]["range_fraction"])
+    assert np.max(paper_usage + 3.29 * problem.noise_fraction) > 1.0
     usage = report["design"]["usage"]
     sigma = np.asarray(report["constraints"]["noise_sigma_fraction_of_range"])
     assert report["constraints"]["range_sigmas"] == 3.29 and report["constraints"]["range_margin"] == 1.0
