@@ -65,8 +65,8 @@ except ImportError:  # editable install made before the package had modules
     from taiji2_estimator_pkg.diagnosis import FAMILIES, DiagnosisOptions, candidate_catalog, diagnose, prepare_input
 from taiji2_apps.campaign.engine import open_cluster  # noqa: E402
 from taiji2_estimator_pkg.diagnosis.candidates import ONSET_KINDS, TIMING_FAMILIES  # noqa: E402
-from taiji2_estimator_pkg.diagnosis.engine import variant_sensitivities  # noqa: E402
 from taiji2_estimator_pkg.diagnosis.model import NominalModel  # noqa: E402
+from taiji2_estimator_pkg.diagnosis.sensitivities import variant_sensitivities  # noqa: E402
 from taiji2_model.config import load_config  # noqa: E402
 from taiji2_model.effect_catalog import GravityGradient, make_effect  # noqa: E402
 from taiji2_model.effects import Effect  # noqa: E402

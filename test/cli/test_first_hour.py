@@ -61,6 +61,25 @@ def test_experiment_refuses_bad_arguments_in_one_line_before_any_node(monkeypatc
     assert expected in lines[0]
 
 
+@pytest.mark.parametrize(("argv", "words"), [
+    (["experiment", "--seed", "abc"], "error: taiji2 experiment: argument --seed: invalid int value: 'abc'"),
+    (["calibrate"], "error: taiji2 calibrate: the following arguments are required"),
+    (["experiment", "--no-such-option"], "error: taiji2 experiment: unrecognized arguments: --no-such-option"),
+    (["no-such-verb"], "error: taiji2: argument <verb>: invalid choice: 'no-such-verb'"),
+])
+def test_argument_errors_of_every_verb_are_one_line_with_status_2(capsys, argv, words):
+    """argparse's own errors (types, missing, unknown options and verbs) in the one-line form of every other
+    bad input, with the way to the usage, not the usage itself."""
+    from taiji2_apps.cli.main import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert exit_info.value.code == 2 and out == "" and len(lines) == 1, err
+    assert lines[0].startswith(words) and lines[0].endswith("--help)"), lines[0]
+
+
 def test_experiment_bad_argument_from_the_command_line(tmp_path):
     env = dict(python_subprocess_env(), TMPDIR=str(tmp_path))
     proc = _taiji2("experiment", "--duration-s", "0", env=env)

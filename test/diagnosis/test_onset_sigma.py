@@ -18,10 +18,11 @@ import numpy as np
 
 from taiji2_estimator_pkg.diagnosis import prepare_input
 from taiji2_estimator_pkg.diagnosis.candidates import candidate_catalog
-from taiji2_estimator_pkg.diagnosis.engine import DiagnosisOptions, _settings, _with_stamp_phases
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 from taiji2_estimator_pkg.diagnosis.onset import onset_posterior
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, record_settings
 from taiji2_estimator_pkg.diagnosis.record import Record, calibrate
+from taiji2_estimator_pkg.diagnosis.stages.nominal import with_stamp_phases
 from taiji2_model.config import load_config
 from taiji2_model.effect_catalog import make_effect
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
@@ -32,13 +33,13 @@ SAMPLES = 12000  # 20 min at 10 Hz
 
 def _onset_z(config, commands, seed: int) -> tuple[float, dict]:
     options = DiagnosisOptions(candidates=("thruster_torque_gain",))
-    settings = _settings(options)
+    settings = record_settings(options)
     rng = np.random.default_rng(900 + seed)
     truth = float(rng.uniform(0.2, 0.6) * SAMPLES / config.sample_rate_hz)
     out = simulate_batch(config, 977 + seed, commands,
                          effects=[make_effect("thruster_torque_gain", gain=0.03, axis="y", onset_s=truth)])
     inp = prepare_input(out.t_s, out.st_quat_xyzw, out.voltages_v, commands, config.sample_rate_hz)
-    model = _with_stamp_phases(NominalModel.from_config(config), inp)
+    model = with_stamp_phases(NominalModel.from_config(config), inp)
     t_mid = float(0.5 * (inp.t_s[0] + inp.t_s[-1]))
     g, d, _, _ = calibrate(inp, model, settings, 2, lambda message: None, (), t_mid)
     candidates, _ = candidate_catalog(("thruster_torque_gain",), options.orbit_period_s, options.suspension_hz,

@@ -58,7 +58,7 @@ def test_latency_and_lag_are_fitted_jointly():
     """A command latency and a thruster lag together (reference fidelity, 3 h): the delay and lag
     signatures are exact only jointly. Fitted side by side, the split came out 0.052 / 0.148 s
     +- 0.006 s (11 sigma off) with a residual of significance 408 at torque_z 0.3-1 Hz; the joint
-    fit (engine._joint_timing) finds the split within its sigma. Checks (seeded, 3 sigma): no
+    fit (stages.final_scan._joint_timing) finds the split within its sigma. Checks (seeded, 3 sigma): no
     physical effect named, latency and lag each within 3 sigma of the truth, and the residual left
     at the torque channels at most 2 % of that of the side-by-side fit (in -log10 p; 5.4 measured). What remains
     is second order in the calibration (docs/diagnosis.md section 11): the same data with the

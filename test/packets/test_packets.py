@@ -277,7 +277,7 @@ def test_cli_export_import_info_and_bad_input(tmp_path):
     (tmp_path / "short.tm").write_bytes(octets[:40])
     (tmp_path / "late.yaml").write_text("time_correlation: {offset_s: 1800000000.0}\n")
     for argv, words in (
-        (("calibrate", tmp_path / "garbage.tm"), "not a ROS 2 bag"),
+        (("calibrate", tmp_path / "garbage.tm"), "neither a ROS 2 bag nor CCSDS Space Packets"),
         (("bag", "import", tmp_path / "short.tm", "-o", tmp_path / "x"), "not a CCSDS packet file"),
         (("bag", "export", tmp_path / "bag", "--ccsds", tmp_path / "exp.tm"), "already exists"),
         (("bag", "export", tmp_path / "bag", "--ccsds", tmp_path / "neg.tm", "--time-correlation",

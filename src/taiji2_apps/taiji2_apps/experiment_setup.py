@@ -14,10 +14,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from taiji2_apps.maneuver_choice import MANEUVER_CHOICES, choose_maneuver
+
 __all__ = ["MANEUVER_CHOICES", "ExperimentPlan", "experiment_verdict", "plan_experiment"]
 
-#: ``--maneuver`` keywords (anything else is a maneuver file)
-MANEUVER_CHOICES = ("design", "paper")
 #: the simulator's duration_s range [s]
 _MAX_DURATION_S = 1e7
 _METHODS = ("gls", "paper")
@@ -58,6 +58,12 @@ class ExperimentPlan:
         """The maneuver lasts the whole run (zero torque after its end otherwise)."""
         return self.maneuver.start_s <= 0.0 and self.maneuver.start_s + self.maneuver.duration_s >= self.duration_s
 
+    def provenance(self) -> dict[str, Any]:
+        """What was flown, as results.json records it: kind, file and the maneuver's parameters."""
+        from taiji2_model.maneuver_families import maneuver_spec
+
+        return {"kind": self.maneuver_kind, "file": self.maneuver_file, **maneuver_spec(self.maneuver)}
+
     def commander_parameters(self) -> list[str]:
         """``-p`` arguments of maneuver_commander for this maneuver."""
         if self.maneuver_file:
@@ -73,8 +79,8 @@ def plan_experiment(layout: str, config_file: str, maneuver: str | None, duratio
     ``config_file``), else its preset.
     """
     from taiji2_model.config import ConfigError, load_config
-    from taiji2_model.maneuver import ManeuverError, SquareWaveManeuver
-    from taiji2_model.maneuver_families import builtin_maneuver_file, check_thrust, load_maneuver_file
+    from taiji2_model.maneuver import ManeuverError
+    from taiji2_model.maneuver_families import check_thrust
     from taiji2_sim_pkg.nodes.spacecraft_sim import _overrides
 
     if method not in _METHODS:  # the estimators' message (nodes/common.py)
@@ -90,27 +96,8 @@ def plan_experiment(layout: str, config_file: str, maneuver: str | None, duratio
     except ConfigError as exc:
         raise ValueError(str(exc)) from None
     source = config_file or layout
-    if maneuver is None:
-        maneuver = "design" if not config_file and builtin_maneuver_file(layout) else "paper"
-    if maneuver == "design":
-        path = builtin_maneuver_file(layout)
-        if path is None:
-            raise ValueError(f"--maneuver design: no shipped design for layout {layout!r}; fly --maneuver paper, or "
-                             f"make one with taiji2 design --layout {layout} --out DIR and pass DIR/maneuver.yaml")
-        kind, label = "design", f"the shipped {layout} design (taiji2 design)"
-    elif maneuver == "paper":
-        path, kind, label = None, "paper", f"the paper's {layout} preset"
-    else:
-        path, kind, label = str(Path(maneuver).resolve()), "file", f"maneuver file {maneuver}"
-    try:
-        flown = load_maneuver_file(path) if path else None
-    except (ConfigError, ManeuverError) as exc:
-        raise ValueError(str(exc)) from None
-    if duration_s is None:
-        duration_s = float(flown.start_s + flown.duration_s) if flown is not None else 10800.0
-    if flown is None:
-        m = preset.maneuver
-        flown = SquareWaveManeuver(m.period_s, m.amplitude_n_m, m.phase_s, m.start_s, duration_s)
+    chosen = choose_maneuver(layout, maneuver, duration_s, config_file=config_file, preset=preset)
+    flown, kind, path, label, duration_s = chosen.maneuver, chosen.kind, chosen.file, chosen.label, chosen.duration_s
     thrusters = preset.thrusters
     try:
         check_thrust(flown, thrusters.min_thrust_n, thrusters.max_thrust_n, thrusters.lever_arm_m)

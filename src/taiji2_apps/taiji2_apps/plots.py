@@ -31,6 +31,11 @@ from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_R
 G_NAMES = (r"$G_{P\phi}$", r"$G_{P\theta}$", r"$G_{P\psi}$")
 
 
+def _flown(label: str) -> str:
+    """The second title line naming what was flown (every figure says which maneuver it shows)."""
+    return f"\nflown: {label}" if label else ""
+
+
 def running_estimates(t_s: np.ndarray, quat_xyzw: np.ndarray, voltages_v: np.ndarray, instrument: InstrumentModel,
                       every_s: float = 30.0, progress: Callable[[int, int], None] | None = None,
                       ) -> dict[str, np.ndarray]:
@@ -62,7 +67,8 @@ def running_estimates(t_s: np.ndarray, quat_xyzw: np.ndarray, voltages_v: np.nda
 
 
 def plot_angular_acceleration_fit(path: Path, t_s: np.ndarray, quat_xyzw: np.ndarray, voltages_v: np.ndarray,
-                                  instrument: InstrumentModel, g: np.ndarray, segment_s: float = 1000.0) -> None:
+                                  instrument: InstrumentModel, g: np.ndarray, segment_s: float = 1000.0,
+                                  flown: str = "") -> None:
     """Star-tracker vs calibrated-GRS1 angular acceleration (same smoothing on both sides), CRF."""
     smoother = SmoothingDerivative(601, 2, instrument.dt_s)
     _, st_accel = smoother.apply_attitude(integrate_attitude(quat_xyzw))
@@ -79,13 +85,14 @@ def plot_angular_acceleration_fit(path: Path, t_s: np.ndarray, quat_xyzw: np.nda
         ax.set_ylabel(f"{'XYZ'[axis]} [nrad s$^{{-2}}$]")
     axes[0].legend(loc="upper right")
     axes[-1].set_xlabel("time [s]")
-    fig.suptitle("Angular acceleration in CRF: star tracker vs calibrated GRS1 (same smoothing)")
+    fig.suptitle("Angular acceleration in CRF: star tracker vs calibrated GRS1 (same smoothing)" + _flown(flown))
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def plot_estimates(directory: Path, history: dict[str, np.ndarray], g_true: np.ndarray, d_true: np.ndarray) -> None:
+def plot_estimates(directory: Path, history: dict[str, np.ndarray], g_true: np.ndarray, d_true: np.ndarray,
+                   flown: str = "") -> None:
     """Running estimates with 1-sigma bands, the truth and the requirement bands."""
     t = history["t_s"]
     fig, axes = plt.subplots(3, 2, figsize=(11, 7), sharex=True)
@@ -103,7 +110,7 @@ def plot_estimates(directory: Path, history: dict[str, np.ndarray], g_true: np.n
     axes[0, 0].legend(loc="upper right", fontsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
-    fig.suptitle("Scale factors: running estimate (default method) against truth and requirement")
+    fig.suptitle("Scale factors: running estimate (default method) against truth and requirement" + _flown(flown))
     fig.tight_layout()
     fig.savefig(directory / "scale_factors_vs_time.png", dpi=110)
     plt.close(fig)
@@ -123,35 +130,38 @@ def plot_estimates(directory: Path, history: dict[str, np.ndarray], g_true: np.n
     axes[0, 0].legend(loc="upper right", fontsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
-    fig.suptitle("c.m. offsets (CRF): running estimate (default method) against truth and requirement")
+    fig.suptitle("c.m. offsets (CRF): running estimate (default method) against truth and requirement"
+                 + _flown(flown))
     fig.tight_layout()
     fig.savefig(directory / "com_offsets_vs_time.png", dpi=110)
     plt.close(fig)
 
 
 def plot_error_vs_crlb(path: Path, history: dict[str, np.ndarray], g_true: np.ndarray, d_true: np.ndarray,
-                       layout: Any, overrides: dict[str, Any]) -> None:
-    """|error| and reported sigma over time against the CRLB at the same durations (GRS1)."""
+                       layout: Any, overrides: dict[str, Any], maneuver: Any = None, flown: str = "") -> None:
+    """|error| and reported sigma over time against the CRLB at the same durations (both GRS)."""
     t = history["t_s"]
     marks = np.unique(np.linspace(t[0], t[-1], 8).round(-1))
-    bounds = [crlb_for_layout(layout, float(m), overrides=overrides) for m in marks]
+    bounds = [crlb_for_layout(layout, float(m), overrides=overrides, maneuver=maneuver) for m in marks]
     crlb_g = np.array([b.scale_factor_relative_sigma for b in bounds]) * 100
     crlb_d = np.array([b.com_offset_sigma for b in bounds]) * 1e6
-    fig, axes = plt.subplots(2, 3, figsize=(12, 6), sharex=True)
-    for j in range(3):
-        ax = axes[0, j]
+    fig, axes = plt.subplots(4, 3, figsize=(12, 11), sharex=True)
+    for j in range(6):  # GRS1 then GRS2: a row of G and a row of d each
+        grs, axis = j // 3 + 1, j % 3
+        ax = axes[2 * (grs - 1), axis]
         ax.semilogy(t, np.abs(history["g"][:, j] / g_true[j] - 1) * 100, lw=0.8, label="|error|")
         ax.semilogy(t, history["g_sigma"][:, j] / g_true[j] * 100, lw=1.2, label="reported sigma")
         ax.semilogy(marks, crlb_g[:, j], "k--o", ms=3, label="CRLB")
-        ax.set_title(f"GRS1 {G_NAMES[j]} [%]")
-        ax = axes[1, j]
+        ax.set_title(f"GRS{grs} {G_NAMES[axis]} [%]")
+        ax = axes[2 * (grs - 1) + 1, axis]
         ax.semilogy(t, np.abs(history["d"][:, j] - d_true[j]) * 1e6, lw=0.8, label="|error|")
         ax.semilogy(t, history["d_sigma"][:, j] * 1e6, lw=1.2, label="reported sigma")
         ax.semilogy(marks, crlb_d[:, j], "k--o", ms=3, label="CRLB")
-        ax.set_title(f"GRS1 d{'xyz'[j]} [um]")
+        ax.set_title(f"GRS{grs} d{'xyz'[axis]} [um]")
+    for ax in axes[-1]:
         ax.set_xlabel("time [s]")
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle("Error and reported sigma against the Cramer-Rao bound")
+    fig.suptitle("Error and reported sigma against the Cramer-Rao bound" + _flown(flown))
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -58,20 +58,23 @@ class EstimateTable:
         method = ""
         for grs in (1, 2):
             sf = latest[SCALE_FACTOR_ESTIMATE_TOPIC_OF[grs]]
-            d = latest[COM_OFFSET_ESTIMATE_TOPIC_OF[grs]]
+            d = latest.get(COM_OFFSET_ESTIMATE_TOPIC_OF[grs])  # none: d was never determined (no G to use)
             sf_truth = latest.get(TRUE_SCALE_FACTOR_TOPIC_OF[grs])
             d_truth = latest.get(TRUE_COM_OFFSET_TOPIC_OF[grs])
             method = sf.method
+            d_m = np.full(3, np.nan) if d is None else np.array([d.offset.x, d.offset.y, d.offset.z])
+            d_cov = np.full((3, 3), np.nan) if d is None else np.array(d.covariance, dtype=float).reshape(3, 3)
             results.append(GrsResult(
                 grs_id=grs,
                 scale_factors=np.array(sf.scale_factors, dtype=float),
                 scale_factors_cov=np.array(sf.covariance, dtype=float).reshape(3, 3),
-                com_offset_m=np.array([d.offset.x, d.offset.y, d.offset.z]),
-                com_offset_cov=np.array(d.covariance, dtype=float).reshape(3, 3),
+                com_offset_m=d_m,
+                com_offset_cov=d_cov,
                 scale_factors_truth=None if sf_truth is None else np.array(sf_truth.scale_factors, dtype=float),
                 com_offset_truth_m=None if d_truth is None else np.array(
                     [d_truth.offset.x, d_truth.offset.y, d_truth.offset.z]),
-                samples_used=int(sf.samples_used), samples_rejected=int(sf.samples_rejected + d.samples_rejected),
+                samples_used=int(sf.samples_used),
+                samples_rejected=int(sf.samples_rejected + (0 if d is None else d.samples_rejected)),
                 nis_mean=float(sf.nis_mean)))
         diff = latest.get(COM_OFFSET_DIFFERENCE_TOPIC)
         table = cls(method=method, grs=results, extra={"layout": layout})

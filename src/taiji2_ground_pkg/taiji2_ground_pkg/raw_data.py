@@ -11,7 +11,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from taiji2_estimator_pkg.io.raw_bag import RawExperiment, load_raw_bag
+from taiji2_estimator_pkg.io.raw_bag import RawBagError, RawExperiment, load_raw_bag
 from taiji2_ground_pkg.raw_packets import load_raw_packets
 from taiji2_model.contract import RAW_TOPICS
 from taiji2_runtime.packets.files import is_packet_path
@@ -42,4 +42,11 @@ def load_raw_data(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPIC
     """
     if is_packet_path(Path(path)):
         return load_raw_packets(path, required=required, correlation=correlation)
-    return load_raw_bag(path, required=required)
+    try:
+        return load_raw_bag(path, required=required)
+    except RawBagError as exc:
+        if not exc.problem.startswith("not a ROS 2 bag"):
+            raise
+        # neither form: say both, since a user with packets may not know they are read too
+        either = "neither a ROS 2 bag nor CCSDS Space Packets (a packet file or directory, recognised by content)"
+        raise RawBagError(exc.path, exc.problem.replace("not a ROS 2 bag", either, 1)) from None

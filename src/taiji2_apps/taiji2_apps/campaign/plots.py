@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from taiji2_apps.campaign.summary import ParameterSummary
+from taiji2_apps.campaign.summary import ParameterSummary, few_seeds_note
 
 
 def plot_campaign(table: object, summaries: Sequence[ParameterSummary], out_dir: Path) -> list[Path]:
@@ -30,6 +30,7 @@ def plot_campaign(table: object, summaries: Sequence[ParameterSummary], out_dir:
     ax.plot(grid, np.exp(-grid**2 / 2) / np.sqrt(2 * np.pi), "k--", label="N(0, 1)")
     ax.set_xlabel("error / reported sigma (clipped to +-5)")
     ax.set_ylabel("density")
+    ax.set_title("Campaign: error / reported sigma of every estimate against N(0, 1)")
     ax.legend()
     fig.tight_layout()
     paths = [out_dir / "errors_over_sigma.png"]
@@ -46,6 +47,10 @@ def plot_campaign(table: object, summaries: Sequence[ParameterSummary], out_dir:
     ax.axhspan(0.8, 1.25, color="g", alpha=0.1, label="[0.8, 1.25]")
     ax.set_xticks(x, [f"{s.parameter} ({s.method})" for s in summaries], rotation=70, fontsize=7)
     ax.set_ylabel("error std / CRLB (95 % bootstrap)")
+    seeds = min((s.n for s in summaries), default=0)
+    note = few_seeds_note(seeds)
+    ax.set_title("Campaign: error std over seeds / Cramer-Rao bound, per parameter "
+                 f"({seeds} seeds, 95 % bootstrap over seeds)" + (f"\n{note}" if note else ""), fontsize=9)
     ax.legend()
     fig.tight_layout()
     paths.append(out_dir / "std_over_crlb.png")

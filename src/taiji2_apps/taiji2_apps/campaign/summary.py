@@ -18,6 +18,18 @@ from taiji2_apps.campaign.case import PARAMETERS
 #: Bootstrap resamples and seed (the intervals are reproducible).
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 20261124
+#: Fewer seeds than this: the percentile bootstrap of a standard deviation is rough (with n seeds there are
+#: at most n**n resamples, the smallest of which repeat one seed and have std 0, and the interval
+#: undercovers), so the table and the plot say so.
+BOOTSTRAP_MIN_SEEDS = 20
+
+
+def few_seeds_note(n: int) -> str | None:
+    """A warning for intervals from ``n`` seeds, or None when there are enough."""
+    if n >= BOOTSTRAP_MIN_SEEDS:
+        return None
+    return (f"only {n} seeds: the 95 % bootstrap intervals are rough below {BOOTSTRAP_MIN_SEEDS} seeds "
+            "(run more seeds for intervals to rely on)")
 
 
 @dataclass
@@ -83,23 +95,64 @@ def _summary(group: str, method: str, parameter: str, unit: str, err: np.ndarray
                             std / crlb, float(crlb_lo), float(crlb_hi), std / mean_sig, float(sig_lo), float(sig_hi))
 
 
-def format_summary(summaries: Sequence[ParameterSummary]) -> str:
+@dataclass
+class RequirementSummary:
+    """How many seeds of one group and method met every requirement (G to 0.3 %, d to 100 um, both GRS)."""
+
+    group: str
+    method: str
+    seeds: int
+    all_met: int
+
+    @property
+    def fraction(self) -> float:
+        """Fraction of the seeds meeting every requirement."""
+        return self.all_met / self.seeds if self.seeds else float("nan")
+
+
+def requirement_summaries(table: object) -> list[RequirementSummary]:
+    """Per group and method: the seeds whose every G and d met its requirement, as the verdict judges a run
+    (1-sigma within the requirement and, the truth being known, the error within it too)."""
+    from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
+
+    columns = table.to_pydict()
+    met: dict[tuple[str, str], dict[int, bool]] = {}
+    for g, m, seed, p, status, err, sig, truth in zip(columns["group"], columns["method"], columns["seed"],
+                                                      columns["parameter"], columns["status"], columns["error"],
+                                                      columns["sigma"], columns["truth"], strict=True):
+        if status != "ok" or not p.startswith("grs"):
+            continue
+        limit = SCALE_FACTOR_REQUIREMENT_REL * abs(truth) if ".G_" in p else COM_OFFSET_REQUIREMENT_M
+        ok = bool(sig <= limit and abs(err) <= limit)  # NaN (undetermined) is not met
+        seeds = met.setdefault((g, m), {})
+        seeds[seed] = seeds.get(seed, True) and ok
+    return [RequirementSummary(g, m, len(seeds), sum(seeds.values())) for (g, m), seeds in met.items()]
+
+
+def format_summary(summaries: Sequence[ParameterSummary],
+                   requirements: Sequence[RequirementSummary] = ()) -> str:
     """A plain-text table, one block per group and method."""
     lines: list[str] = []
     current = None
     for s in summaries:
         if (s.group, s.method) != current:
             current = (s.group, s.method)
-            lines += ["", f"== {s.group} | method {s.method} | {s.n} seeds ==",
+            note = few_seeds_note(s.n)
+            lines += ["", f"== {s.group} | method {s.method} | {s.n} seeds ==", *([f"  note: {note}"] if note else []),
                       f"  {'parameter':14} {'unit':>4} {'mean err':>10} {'err std':>10} {'mean sig':>10} "
                       f"{'CRLB':>10} {'std/CRLB [95% CI]':>22} {'std/sig [95% CI]':>22}"]
         lines.append(f"  {s.parameter:14} {s.unit:>4} {s.mean_error:10.4g} {s.error_std:10.4g} {s.mean_sigma:10.4g} "
                      f"{s.crlb:10.4g} {s.std_over_crlb:6.2f} [{s.std_over_crlb_lo:5.2f}, {s.std_over_crlb_hi:5.2f}]"
                      f"   {s.std_over_sigma:6.2f} [{s.std_over_sigma_lo:5.2f}, {s.std_over_sigma_hi:5.2f}]")
+    if requirements:
+        lines += ["", "every requirement met (G to 0.3 %, d to 100 um, 1 sigma and error, both GRS):"]
+        lines += [f"  {r.group} | method {r.method}: {r.all_met} of {r.seeds} seeds ({100 * r.fraction:.1f} %)"
+                  for r in requirements]
     return "\n".join(lines).lstrip("\n")
 
 
-def save_summary(summaries: Sequence[ParameterSummary], out_dir: Path) -> list[Path]:
+def save_summary(summaries: Sequence[ParameterSummary], out_dir: Path,
+                 requirements: Sequence[RequirementSummary] = ()) -> list[Path]:
     """``summary.csv`` and ``summary.txt`` in ``out_dir``."""
     import csv
 
@@ -111,5 +164,5 @@ def save_summary(summaries: Sequence[ParameterSummary], out_dir: Path) -> list[P
         writer.writeheader()
         writer.writerows(asdict(s) for s in summaries)
     txt_path = out_dir / "summary.txt"
-    txt_path.write_text(format_summary(summaries) + "\n", encoding="utf-8")
+    txt_path.write_text(format_summary(summaries, requirements) + "\n", encoding="utf-8")
     return [csv_path, txt_path]

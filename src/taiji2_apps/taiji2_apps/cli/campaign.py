@@ -55,14 +55,15 @@ def main(args: argparse.Namespace) -> int:
 def summarize(directory: Path) -> int:
     from taiji2_apps.campaign.plots import plot_campaign
     from taiji2_apps.campaign.store import read_rows
-    from taiji2_apps.campaign.summary import format_summary, save_summary, summarize_table
+    from taiji2_apps.campaign.summary import format_summary, requirement_summaries, save_summary, summarize_table
 
     table = read_rows(directory)
     summaries = summarize_table(table)
-    print(format_summary(summaries))
+    requirements = requirement_summaries(table)
+    print(format_summary(summaries, requirements))
     failed = sum(1 for s in table.column("status").to_pylist() if s != "ok")
     if failed:
         print(f"\n{failed} failed case(s): see the error_message column", file=sys.stderr)
-    paths = save_summary(summaries, directory) + plot_campaign(table, summaries, directory)
+    paths = save_summary(summaries, directory, requirements) + plot_campaign(table, summaries, directory)
     print(f"\n[campaign] wrote {', '.join(str(p) for p in paths)}", file=sys.stderr)
     return 0

@@ -142,7 +142,7 @@ def main(args: argparse.Namespace) -> int:
         if getattr(args, "link", ""):
             from taiji2_apps.cli.experiment_link import run_link_experiment
 
-            status = run_link_experiment(args)  # onboard and ground joined by a space link (docs/link.md)
+            status = run_link_experiment(args, plan, temporary)  # onboard and ground joined by a space link
         else:
             status = _run(args, plan, None if reservation is None else reservation.domain_id, temporary)
     finally:
@@ -229,12 +229,11 @@ def _report(args: argparse.Namespace, plan: Any, monitor: _Monitor, out: Path, t
     """Print the final estimates and the verdict, write results.json; returns 0 (every requirement met) or 3."""
     from taiji2_apps.experiment_setup import experiment_verdict
     from taiji2_estimator_pkg.report import EstimateTable, format_table
-    from taiji2_model.maneuver_families import maneuver_spec
 
     table = EstimateTable.from_messages(monitor.latest, layout=args.layout)
     verdict = experiment_verdict(plan, table, args.layout, monitor.diagnostics)
     results = table.to_dict()
-    results["maneuver"] = {"kind": plan.maneuver_kind, "file": plan.maneuver_file, **maneuver_spec(plan.maneuver)}
+    results["maneuver"] = plan.provenance()
     results["verdict"] = verdict.to_dict()
     (out / "results.json").write_text(json.dumps(results, indent=2))
     if args.json:

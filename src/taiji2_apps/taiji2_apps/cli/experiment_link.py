@@ -137,6 +137,14 @@ class LinkMonitor:
                     name, _, text = part.partition(": ")
                     self.faults_seen[name] = text
 
+    def scale_factors_determined(self) -> bool:
+        """The latest scale factors of both GRS are finite (the data determined them: the scale-factor estimator
+        publishes NaN until then, and the c.m.-offset estimator waits for finite ones)."""
+        import math
+
+        messages = [self.latest.get(f"/taiji2/estimates/grs{g}/scale_factors") for g in (1, 2)]
+        return all(m is not None and all(map(math.isfinite, (*m.scale_factors, *m.covariance))) for m in messages)
+
     def stamps_ns(self, topic: str) -> tuple[int, int]:
         """:func:`estimate_stamps_ns` of the latest estimate on ``topic`` ((-1, -1): none yet)."""
         msg = self.latest.get(topic)
@@ -226,6 +234,11 @@ def pass_of(ground_time_s: float | None, model: Any) -> int | None:
     return last
 
 
+#: the verdict's classes of a requirement not met, in the words of the link report
+_NOT_MET_WHY = {"cannot": "the Cramer-Rao bound is beyond it", "estimator": "the 1-sigma is beyond it",
+                "chance": "the error of this run is beyond it"}
+
+
 def format_link_report(link: dict[str, Any]) -> str:
     """The per-stream and operations part of the report, as text."""
     lines = [f"link {link['model']['name']} (seed {link['seed']}): light time {link['model']['light_time_s']:g} s, "
@@ -239,14 +252,18 @@ def format_link_report(link: dict[str, Any]) -> str:
         lines.append(f"  {name:16} {s['generated']:9d} {s['delivered']:9d} {s['lost']:6d} {s['duplicated']:6d} "
                      f"{s['reordered']:7d} {s['overwritten']:7d} {med + ' / ' + mx:>20} "
                      f"{ground.get('missing', 0):16d}")
-    lines.append("Requirements (1-sigma), first met on the ground: data (onboard) time -> ground time")
+    lines.append("Requirements (the verdict below): met or not at the end; when the 1-sigma first came within the "
+                 "requirement: data (onboard) time -> ground time")
     for r in link["requirements"]:
+        status = r.get("status", "met")
+        head = f"  GRS{r['grs']} {r['parameter']:9} ({r['requirement']}): {'met' if status == 'met' else 'NOT MET'}"
+        head += "" if status == "met" else f" ({_NOT_MET_WHY.get(status, status)})"
         if r["onboard_time_s"] is None:
-            lines.append(f"  GRS{r['grs']} {r['parameter']:9} ({r['requirement']}): not met")
+            lines.append(f"{head}; 1-sigma never within")
             continue
         where = "" if r["pass"] is None else f" (pass {r['pass']})"
-        lines.append(f"  GRS{r['grs']} {r['parameter']:9} ({r['requirement']}): onboard {r['onboard_time_s']:10.1f} s"
-                     f" -> ground {r['ground_time_s']:10.1f} s{where}")
+        lines.append(f"{head}; 1-sigma within from onboard {r['onboard_time_s']:.1f} s -> ground "
+                     f"{r['ground_time_s']:.1f} s{where}")
     c = link.get("commanding")
     if c:
         lines.append(f"Commanding (PUS 11): {c['tables']} TC[11,4] with {c['activities']} activities; acknowledged "
@@ -257,8 +274,9 @@ def format_link_report(link: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def run_link_experiment(args: argparse.Namespace) -> int:
-    """``taiji2 experiment --link``: the whole run (see the module docstring)."""
+def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) -> int:
+    """``taiji2 experiment --link``: the whole run (see the module docstring); ``plan`` is the checked experiment
+    (:func:`taiji2_apps.experiment_setup.plan_experiment`), ``temporary``: ``args.out`` is removed at the end."""
     import tempfile
 
     from taiji2_runtime.ros import rclpy
@@ -349,9 +367,12 @@ def run_link_experiment(args: argparse.Namespace) -> int:
         through = final["released_through_s"]
         sf_target = max((v for k, v in through.items() if k != "executed_torque" and v is not None), default=0)
         d_target = max((through.get(k) or 0 for k in ("grs1", "grs2")), default=0)
-        return (all(monitor.stamps_ns(t)[0] >= sf_target * _NS - 1000 for t in sf_topics)
-                and all(data >= d_target * _NS - 1000 and g >= sf_target * _NS - 1000
-                        for data, g in map(monitor.stamps_ns, d_topics)))
+        if not all(monitor.stamps_ns(t)[0] >= sf_target * _NS - 1000 for t in sf_topics):
+            return False
+        if not monitor.scale_factors_determined() and all(monitor.latest.get(t) is None for t in d_topics):
+            return True  # G undetermined on all the data (e.g. no maneuver flown): no d can come; the verdict says
+        return all(data >= d_target * _NS - 1000 and g >= sf_target * _NS - 1000
+                   for data, g in map(monitor.stamps_ns, d_topics))
 
     def progress() -> Progress:
         stamps = tuple(map(monitor.stamps_ns, sf_topics + d_topics))
@@ -377,8 +398,7 @@ def run_link_experiment(args: argparse.Namespace) -> int:
             print(f"error: taiji2 experiment: {result.failure}", file=sys.stderr)
             status = 1
         else:
-            _report(args, model, link_seed, monitor, out, duration_s, result.wall_s)
-            status = 0
+            status = _report(args, plan, model, link_seed, monitor, out, duration_s, result.wall_s, temporary)
     finally:
         executor.shutdown()
         node.destroy_node()
@@ -389,17 +409,23 @@ def run_link_experiment(args: argparse.Namespace) -> int:
     return status
 
 
-def _report(args: argparse.Namespace, model: Any, link_seed: int, monitor: LinkMonitor, out: Path,
-            duration_s: float, elapsed: float) -> None:
-    """Print the final estimates and the link report, write results.json."""
+def _report(args: argparse.Namespace, plan: Any, model: Any, link_seed: int, monitor: LinkMonitor, out: Path,
+            duration_s: float, elapsed: float, temporary: bool) -> int:
+    """Print the final estimates, the link report and the verdict, write results.json; returns 0 (every
+    requirement met) or 3. The estimate table, the requirement section and the verdict are one evaluation
+    (:func:`~taiji2_apps.experiment_setup.experiment_verdict`), as in the direct run."""
+    from taiji2_apps.experiment_setup import experiment_verdict
     from taiji2_estimator_pkg.report import EstimateTable, format_table
 
     final = next(rec for rec in reversed(monitor.reception) if rec["end_of_data"])
     table = EstimateTable.from_messages(monitor.latest, layout=args.layout)
+    verdict = experiment_verdict(plan, table, args.layout, monitor.diagnostics)
+    status_of = {c.name: c.status for c in verdict.checks}
     results = table.to_dict()
     requirements = requirement_times(monitor.history, monitor.reception)
     for r in requirements:
         r["pass"] = pass_of(r["ground_time_s"], model)
+        r["status"] = status_of.get(f"grs{r['grs']}.{r['parameter']}", "met")
     report = monitor.link_report
     faults = dict(report.get("faults", {}))
     faults.update({k: v for k, v in monitor.faults_seen.items() if k not in faults})
@@ -414,12 +440,20 @@ def _report(args: argparse.Namespace, model: Any, link_seed: int, monitor: LinkM
     if link["commanding"]["lost_on_uplink"]:
         faults["command table lost on uplink"] = ("TC[11,4] #" + ", #".join(
             map(str, link["commanding"]["lost_on_uplink"])) + " never acknowledged")
+    # what the link did to the run belongs to the verdict, beside the requirements it leaves unmet
+    verdict.warnings.extend(f"link fault: {name}: {text}" for name, text in faults.items())
+    results["maneuver"] = plan.provenance()
     results["link"] = link
+    results["verdict"] = verdict.to_dict()
     (out / "results.json").write_text(json.dumps(results, indent=2))
     if args.json:
         print(json.dumps(results))
     else:
         print(format_table(table))
         print(format_link_report(link))
-        print(f"\n{duration_s:g} s simulated in {elapsed:.1f} s wall ({duration_s / elapsed:.0f}x real time); "
-              f"results in {out / 'results.json'}")
+        kept = (f"results in {out / 'results.json'}" if not temporary or args.keep
+                else "--out DIR keeps the node logs and results.json")
+        print(f"\n{duration_s:g} s simulated in {elapsed:.1f} s wall ({duration_s / elapsed:.0f}x real time); {kept}\n")
+        print("\n".join(verdict.lines()))
+    return ExitStatus.OK if verdict.all_met else ExitStatus.NOT_MET
+

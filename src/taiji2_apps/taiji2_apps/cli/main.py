@@ -22,6 +22,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 from types import ModuleType
+from typing import NoReturn
 
 from taiji2_apps.cli.exit_status import ExitStatus
 from taiji2_runtime.cli.plain_text import plain_text
@@ -69,8 +70,18 @@ def _description(module: ModuleType) -> str | None:
     return plain_text(module.__doc__) if module.__doc__ else None
 
 
+class _OneLineErrorParser(argparse.ArgumentParser):
+    """argparse with the project's one-line errors: ``error: taiji2 <verb>: <problem> (see ... --help)``, status 2.
+
+    argparse's own form prints the whole usage before ``<prog>: error: ...``, which buries the problem; the
+    usage is one ``--help`` away. Sub-parsers (the verbs) are made of this class too."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(ExitStatus.BAD_INPUT, f"error: {self.prog}: {message} (see {self.prog} --help)\n")
+
+
 def _top_parser(verbs: dict[str, str]) -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
-    parser = argparse.ArgumentParser(prog=_PROG, description=_DESCRIPTION)
+    parser = _OneLineErrorParser(prog=_PROG, description=_DESCRIPTION)
     parser.add_argument(PRINT_CONFIG, action="store_true",
                         help="print the Cyclone DDS configuration of the embedded runtime (CYCLONEDDS_URI if set, "
                              "else the loopback default) on one line and exit; a mixed graph shares it: "
@@ -102,7 +113,7 @@ def _verb_parser(verb: str, module: ModuleType) -> argparse.ArgumentParser:
     verb_parser = sub.add_parser(verb, help=_summary(module), description=_description(module),
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     module.add_arguments(verb_parser)
-    verb_parser.set_defaults(_module=module)
+    verb_parser.set_defaults(_module=module, _parser=verb_parser)
     return parser
 
 
@@ -154,7 +165,9 @@ def _main(argv: list[str]) -> int:
         print(f"{_PROG}: error: verb {verb!r} is registered ({module_name}) but cannot be imported: {exc}",
               file=sys.stderr)
         return ExitStatus.BAD_INPUT
-    args = _verb_parser(verb, module).parse_args(argv)
+    args, unknown = _verb_parser(verb, module).parse_known_args(argv)
+    if unknown:  # said by the verb's parser, which names the verb
+        args._parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
         return int(args._module.main(args) or 0)
     except BrokenPipeError:

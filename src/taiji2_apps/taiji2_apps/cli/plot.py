@@ -6,10 +6,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from taiji2_apps.maneuver_choice import MANEUVER_HELP, choose_maneuver
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--layout", default="type1", help="built-in layout: type1 | type2 (default type1)")
-    parser.add_argument("--duration-s", type=float, default=10800.0, help="experiment length [s] (default 3 h)")
+    parser.add_argument("--duration-s", type=float, default=None,
+                        help="experiment length [s] (default: the maneuver's end, 3 h for the paper's preset)")
+    parser.add_argument("--maneuver", default=None, metavar="design|paper|FILE", help=MANEUVER_HELP)
     parser.add_argument("--seed", type=int, default=1, help="simulator seed (default 1)")
     parser.add_argument("--thruster-force-noise", choices=("on", "off"), default="on",
                         help="simulate with the thruster force noise of the layout's budget (on, default) or "
@@ -24,6 +28,8 @@ _MIN_DURATION_S = 200.0
 def main(args: argparse.Namespace) -> int:
     import math
 
+    chosen = choose_maneuver(args.layout, args.maneuver, args.duration_s)
+    args.duration_s = chosen.duration_s
     if not (math.isfinite(args.duration_s) and args.duration_s >= _MIN_DURATION_S):
         raise ValueError(f"--duration-s {args.duration_s:g}: must be at least {_MIN_DURATION_S:g} s (shorter runs "
                          "do not determine the estimates the figures show)")
@@ -55,8 +61,9 @@ def main(args: argparse.Namespace) -> int:
     config = load_config(args.layout, overrides={"maneuver.duration_s": args.duration_s, **overrides})
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
-    say(f"simulating {args.duration_s:g} s of {args.layout} (seed {args.seed}) ...")
-    out = simulate_batch(config, args.seed, maneuver_torque_commands(config))
+    say(f"simulating {args.duration_s:g} s of {args.layout}, {chosen.label} (seed {args.seed}) ...")
+    steps = round(args.duration_s * config.sample_rate_hz)
+    out = simulate_batch(config, args.seed, maneuver_torque_commands(config, steps, maneuver=chosen.maneuver))
     instrument = InstrumentModel.from_layout(config)
     g_true = np.concatenate([s.angular_scale_factors for s in config.grs.sensors])
     d_true = np.concatenate([s.com_offset_m for s in config.grs.sensors])
@@ -68,9 +75,10 @@ def main(args: argparse.Namespace) -> int:
         raise ValueError(f"--duration-s {args.duration_s:g}: too short for the estimates to be determined")
     say("drawing the figures ...")
     plots.plot_angular_acceleration_fit(out_dir / "angular_acceleration_fit.png", out.t_s, out.st_quat_xyzw,
-                                        out.voltages_v, instrument, history["g"][-1])
-    plots.plot_estimates(out_dir, history, g_true, d_true)
-    plots.plot_error_vs_crlb(out_dir / "error_vs_crlb.png", history, g_true, d_true, args.layout, overrides)
+                                        out.voltages_v, instrument, history["g"][-1], flown=chosen.label)
+    plots.plot_estimates(out_dir, history, g_true, d_true, flown=chosen.label)
+    plots.plot_error_vs_crlb(out_dir / "error_vs_crlb.png", history, g_true, d_true, args.layout, overrides,
+                             maneuver=chosen.maneuver, flown=chosen.label)
     for name in ("angular_acceleration_fit", "scale_factors_vs_time", "com_offsets_vs_time", "error_vs_crlb"):
         print(out_dir / f"{name}.png")
     say("done")

@@ -21,6 +21,7 @@ import sys
 from typing import Any
 
 from taiji2_apps.cli.exit_status import ExitStatus
+from taiji2_apps.maneuver_choice import MANEUVER_HELP, choose_maneuver
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,7 +31,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fidelity", default="standard", choices=("standard", "reference"),
                         help="standard (the node graph's simulator) or reference (independent discretisation)")
     parser.add_argument("--duration-s", type=float, default=None,
-                        help="simulated duration [s] (default: the layout's maneuver, 3 h)")
+                        help="simulated duration [s] (default: the maneuver's end)")
+    parser.add_argument("--maneuver", default=None, metavar="design|paper|FILE", help=MANEUVER_HELP)
     parser.add_argument("--seed", type=int, default=1, help="seed (default 1)")
     parser.add_argument("--effect", action="append", default=[],
                         help="catalog effect NAME[:key=value,...] (repeatable), e.g. actuation_delay:delay_s=0.1")
@@ -119,8 +121,9 @@ def main(args: argparse.Namespace) -> int:
                 print(f"note: {note}", file=sys.stderr)
         if args.duration_s is not None and not args.duration_s > 0:
             raise ValueError(f"--duration-s {args.duration_s}: must be positive")
-        steps = None if args.duration_s is None else round(args.duration_s * config.sample_rate_hz)
-        commands = maneuver_torque_commands(config, steps)
+        chosen = choose_maneuver(args.layout, args.maneuver, args.duration_s, config_file=args.config, preset=config)
+        steps = round(chosen.duration_s * config.sample_rate_hz)
+        commands = maneuver_torque_commands(config, steps, maneuver=chosen.maneuver)
         if commands.shape[0] == 0:
             raise ValueError("no samples to simulate (duration zero)")
         if args.fidelity == "reference":
@@ -128,12 +131,13 @@ def main(args: argparse.Namespace) -> int:
         else:
             out = simulate_batch(config, args.seed, commands, effects=effects)
         command_t = np.arange(commands.shape[0]) * config.dt_s
-        provenance = {"seed": args.seed, "fidelity": args.fidelity, "config": config.to_dict(), "effects": specs}
+        provenance = {"seed": args.seed, "fidelity": args.fidelity, "config": config.to_dict(), "effects": specs,
+                      "maneuver": chosen.provenance()}
         bag = write_simulated_bag(args.out, out.t_s, out.st_quat_xyzw, out.st_cov_rad2, out.voltages_v, command_t,
                                   commands, storage=args.storage, provenance=provenance)
     except (ConfigError, ValueError, TypeError) as exc:
         print(f"error: taiji2 simulate: {' '.join(str(exc).split())}", file=sys.stderr)
         return ExitStatus.BAD_INPUT
     print(json.dumps({"bag": str(bag), "samples": len(out), "fidelity": args.fidelity, "seed": args.seed,
-                      "effects": specs}))
-    return 0
+                      "maneuver": chosen.label, "effects": specs}))
+    return ExitStatus.OK

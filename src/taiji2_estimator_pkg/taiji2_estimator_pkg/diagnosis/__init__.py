@@ -13,13 +13,7 @@ See ``docs/diagnosis.md``.
 """
 
 from taiji2_estimator_pkg.diagnosis.candidates import FAMILIES, Candidate, NoiseCandidate, candidate_catalog
-from taiji2_estimator_pkg.diagnosis.engine import (
-    DiagnosisOptions,
-    DiagnosisResult,
-    EffectReport,
-    diagnose,
-    variant_sensitivities,
-)
+from taiji2_estimator_pkg.diagnosis.engine import diagnose
 from taiji2_estimator_pkg.diagnosis.inputs import (
     DiagnosisInput,
     InputError,
@@ -28,7 +22,10 @@ from taiji2_estimator_pkg.diagnosis.inputs import (
     prepare_input,
 )
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions
 from taiji2_estimator_pkg.diagnosis.report import write_report
+from taiji2_estimator_pkg.diagnosis.results import DiagnosisResult, EffectReport
+from taiji2_estimator_pkg.diagnosis.sensitivities import variant_sensitivities
 
 __all__ = [
     "FAMILIES",

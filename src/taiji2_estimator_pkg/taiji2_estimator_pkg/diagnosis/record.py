@@ -31,7 +31,7 @@ _FIXED = "__fixed_change__"  # a scratch design column for fits with a fixed cha
 
 
 class RecordSettings:
-    """The options a record needs (a subset of :class:`.engine.DiagnosisOptions`).
+    """The options a record needs (a subset of :class:`.options.DiagnosisOptions`).
 
     Parameters
     ----------

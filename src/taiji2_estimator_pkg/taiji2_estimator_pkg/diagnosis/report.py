@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
-from taiji2_estimator_pkg.diagnosis.engine import DiagnosisResult
+from taiji2_estimator_pkg.diagnosis.results import DiagnosisResult
 
 __all__ = ["write_report"]
 

@@ -12,7 +12,7 @@ naming them would be a confident wrong name. So an accepted effect is named only
    explanations are selected);
 3. it is not one of ``FAMILY_VARIANTS_MAX + 1`` or more variants of one physical family (one GRS's
    effect, :func:`family_group`) accepted together and standing on rules 1 and 2, unless the family
-   as one candidate stands (engine ``_families``): forward selection stacking variants of one family
+   as one candidate stands (``stages.naming._families``): forward selection stacking variants of one family
    is how a catalog imitates an effect it does not hold (a left-out TM stiffness fitted by four
    electrode imbalances). The family (all its variants, one GRS) is one candidate with its whole parameter count in the
    penalty: it stands when it is complete, or when the variants the stack lacks gain more than

@@ -25,9 +25,12 @@ from taiji2_estimator_pkg.core.parameters import com_offset_options, paper_com_o
 from taiji2_estimator_pkg.nodes import common
 from taiji2_estimator_pkg.scale_factor_wait import ScaleFactorHistory, ScaleFactorWait
 from taiji2_model.contract import (
+    ANGULAR_RATE_ESTIMATE_TOPIC,
     COM_OFFSET_DIFFERENCE_TOPIC,
     COM_OFFSET_ESTIMATE_TOPIC_OF,
+    GRS_TOPIC_OF,
     SCALE_FACTOR_ESTIMATE_TOPIC_OF,
+    STAR_TRACKER_TOPIC,
 )
 from taiji2_runtime.batched import create_batched_subscription
 from taiji2_runtime.entry import run_node
@@ -72,14 +75,15 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         qos = common.raw_qos()
         for gid in GRS_IDS:
             # raw streams: up to 16 queued messages per callback (rclpy takes one per wait-set pass otherwise)
-            create_batched_subscription(self, t.GrsVoltages, common.GRS_TOPICS[gid],
+            create_batched_subscription(self, t.GrsVoltages, GRS_TOPIC_OF[gid],
                                         lambda m, g=gid: self._on_grs(m, g), qos)
             self.create_subscription(t.ScaleFactorEstimate, SCALE_FACTOR_ESTIMATE_TOPIC_OF[gid],
                                      self._on_scale_factors, common.estimate_subscription_qos())
         if self.paper:
-            create_batched_subscription(self, t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
+            create_batched_subscription(self, t.StarTracker, STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
         if self.use_rate:
-            self.create_subscription(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, self._on_rate, qos)
+            self.create_subscription(messages.geometry_msgs.Vector3Stamped, ANGULAR_RATE_ESTIMATE_TOPIC, self._on_rate,
+                                     qos)
         self.pubs = {g: self.create_publisher(t.ComOffsetEstimate, COM_OFFSET_ESTIMATE_TOPIC_OF[g],
                                               common.estimate_qos()) for g in GRS_IDS}
         self.diff_pub = self.create_publisher(t.ComOffsetEstimate, COM_OFFSET_DIFFERENCE_TOPIC,
@@ -153,7 +157,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         problem = common.grs_message_problem(msg, grs_id)
         if problem is not None:
             self.node_rejections.add(f"grs{grs_id}", problem)
-            self.get_logger().warn(f"rejected GrsVoltages on {common.GRS_TOPICS[grs_id]}: {problem}",
+            self.get_logger().warn(f"rejected GrsVoltages on {GRS_TOPIC_OF[grs_id]}: {problem}",
                                    throttle_duration_sec=10.0)
             return
         self.add_sample(f"grs{grs_id}", common.stamp_ns(msg.header), common.grs_voltages(msg))

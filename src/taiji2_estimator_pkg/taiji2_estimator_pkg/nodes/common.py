@@ -17,13 +17,10 @@ from taiji2_estimator_pkg.core.instrument import InstrumentModel
 from taiji2_estimator_pkg.core.parameters import DEFAULTS, NODE_DEFAULTS
 from taiji2_estimator_pkg.epochs import EpochAssembler
 from taiji2_estimator_pkg.nodes.runtime_parameters import RUNTIME_CHECKS, accept_runtime_parameters
-from taiji2_model.contract import ANGULAR_RATE_ESTIMATE_TOPIC, GRS_TOPIC_OF
 from taiji2_runtime import node_parameters
 from taiji2_runtime.ros import messages, rclpy
 
-GRS_TOPICS = GRS_TOPIC_OF
 GRS_FRAMES = {1: "tmrf1", 2: "tmrf2"}
-RATE_TOPIC = ANGULAR_RATE_ESTIMATE_TOPIC
 METHODS = ("gls", "paper")
 _NS = 1_000_000_000
 #: a health tick (1 s period) this much later than due is reported as a pause of the process [s]

@@ -20,7 +20,12 @@ from taiji2_estimator_pkg.core.parameters import paper_scale_factor_options, sca
 from taiji2_estimator_pkg.core.scale_factor.gls import ScaleFactorEstimator
 from taiji2_estimator_pkg.core.scale_factor.paper import PaperScaleFactorFilter
 from taiji2_estimator_pkg.nodes import common
-from taiji2_model.contract import SCALE_FACTOR_ESTIMATE_TOPIC_OF
+from taiji2_model.contract import (
+    ANGULAR_RATE_ESTIMATE_TOPIC,
+    GRS_TOPIC_OF,
+    SCALE_FACTOR_ESTIMATE_TOPIC_OF,
+    STAR_TRACKER_TOPIC,
+)
 from taiji2_runtime.batched import create_batched_subscription
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages
@@ -49,15 +54,15 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
         t = messages.taiji2_msgs
         qos = common.raw_qos()
         # raw streams: up to 16 queued messages per callback (rclpy takes one per wait-set pass otherwise)
-        create_batched_subscription(self, t.StarTracker, common.STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
+        create_batched_subscription(self, t.StarTracker, STAR_TRACKER_TOPIC, self._on_star_tracker, qos)
         for gid in GRS_IDS:
-            create_batched_subscription(self, t.GrsVoltages, common.GRS_TOPICS[gid],
+            create_batched_subscription(self, t.GrsVoltages, GRS_TOPIC_OF[gid],
                                         lambda m, g=gid: self._on_grs(m, g), qos)
         self.estimate_pubs = {g: self.create_publisher(t.ScaleFactorEstimate,
                                                        SCALE_FACTOR_ESTIMATE_TOPIC_OF[g],
                                                        common.estimate_qos())
                               for g in GRS_IDS}
-        self.rate_pub = self.create_publisher(messages.geometry_msgs.Vector3Stamped, common.RATE_TOPIC, qos)
+        self.rate_pub = self.create_publisher(messages.geometry_msgs.Vector3Stamped, ANGULAR_RATE_ESTIMATE_TOPIC, qos)
         if resumed is not None:
             # the restored estimate, latched: the killed process's estimates went with it, and a restart after
             # the run's end gets no data that would publish one (health reports its samples from now on)
@@ -87,7 +92,7 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
         problem = common.grs_message_problem(msg, grs_id)
         if problem is not None:
             self.node_rejections.add(f"grs{grs_id}", problem)
-            self.get_logger().warn(f"rejected GrsVoltages on {common.GRS_TOPICS[grs_id]}: {problem} "
+            self.get_logger().warn(f"rejected GrsVoltages on {GRS_TOPIC_OF[grs_id]}: {problem} "
                                    f"(grs_id {msg.grs_id}, frame_id {msg.header.frame_id!r})",
                                    throttle_duration_sec=10.0)
             return

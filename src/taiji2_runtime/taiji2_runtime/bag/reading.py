@@ -114,13 +114,17 @@ def open_reader(path: str | Path) -> Iterator[Reader]:
     from rosbags.rosbag2.errors import ReaderError
 
     bag = check_bag_path(path)
+    repair_dir = None
     try:
         reader = Reader(bag)
         reader.open()
     except BagError:
         raise
     except Exception as exc:  # rosbags, apsw, yaml, struct, OS errors: all mean "cannot read"
-        raise BagError(_culprit(bag) or bag, describe_error(exc)) from exc
+        truncated = _truncated_mcap(bag, exc)
+        if truncated is None:
+            raise BagError(_culprit(bag) or bag, describe_error(exc)) from exc
+        reader, repair_dir = _open_repaired(truncated, exc)
     try:
         yield reader
     except (ReaderError, OSError, EOFError, struct.error) as exc:
@@ -134,6 +138,46 @@ def open_reader(path: str | Path) -> Iterator[Reader]:
             reader.close()
         except Exception:  # closing a broken reader must not hide the first error
             pass
+        if repair_dir is not None:
+            repair_dir.cleanup()
+
+
+#: rosbags' words for an MCAP file whose end (footer, summary) is missing or damaged
+_MCAP_END_ERRORS = ("File end magic is invalid", "Invalid MCAP footer", "Invalid MCAP summary offset")
+
+
+def _truncated_mcap(bag: Path, exc: BaseException) -> Path | None:
+    """The one MCAP file of ``bag`` when opening it failed at its end (a cut recording), else None."""
+    if not any(words in str(exc) for words in _MCAP_END_ERRORS):
+        return None
+    files = [bag] if bag.is_file() else sorted(bag.glob("*.mcap"))
+    return files[0] if len(files) == 1 and files[0].suffix == ".mcap" else None
+
+
+def _open_repaired(mcap: Path, exc: BaseException) -> tuple[Reader, Any]:
+    """A reader of the complete records of a truncated MCAP file (:mod:`.mcap_repair`), with a warning that
+    says how much was recovered, and the temporary directory that holds the repaired copy."""
+    import logging
+    import tempfile
+
+    from rosbags.rosbag2 import Reader
+
+    from taiji2_runtime.bag.mcap_repair import repaired_copy
+
+    directory = tempfile.TemporaryDirectory(prefix="taiji2-mcap-repair-")
+    try:
+        repair = repaired_copy(mcap, Path(directory.name))
+        reader = Reader(repair.path)
+        reader.open()
+        if reader.message_count == 0:  # cut inside its first chunk: nothing to recover, the original error stands
+            reader.close()
+            raise ValueError("no complete message")
+    except Exception:
+        directory.cleanup()
+        raise BagError(mcap, describe_error(exc)) from exc
+    logging.getLogger("taiji2.bag").warning("warning: %s; %d messages recovered", repair.note(mcap),
+                                            reader.message_count)
+    return reader, directory
 
 
 def storage_identifier(reader: Reader) -> str:

@@ -1,35 +1,10 @@
 """Test-mass c.m. offsets d_i (CRF) from the GRS linear accelerations.
 
-Two methods:
+Two methods, their equations in ``docs/estimators.md`` (the one place that holds them):
 
-``paper`` (:class:`PaperComOffsetFilter`)
-    The paper's filter: per GRS a 3-state Kalman filter (Phi = I, Q = 0, Joseph update) on the
-    TMRF linear acceleration ``a_out = G_lin (v1 + v2)`` (scale factors from a scale-factor
-    estimate), ``H = C_i A~`` with A~ from the star tracker's smoothed rate and acceleration, the
-    same smoothing applied to a_out, and the paper's detrending (``Gamma t + Lambda``) done for
-    regressor and data together (as extra diffuse states, which by Frisch-Waugh-Lovell is the same
-    as detrending both sides). Diagonal R. Its covariance is too small (reported, not fixed).
-
-``gls`` (:class:`ComOffsetEstimator`, default)
-    Per epoch and GRS i, in CRF::
-
-        z_i = C_i^T a_lin,i = A~(omega_dot, omega) d_i + a_SC + n_i,
-
-    with A~ built from the *calibrated GRS* angular acceleration ``omega_dot^ = sum_i W_i C_i^T
-    diag(u_i) G_i`` (far less noisy than the star tracker's) and omega from the attitude filter.
-    ``a_SC`` is common to both GRS: white thruster noise (in R, fully correlated between the GRS)
-    plus SRP, an AR(1) state of a Kalman filter; bias and trend per GRS are regression parameters
-    (the paper's detrending, applied to regressor and data together by construction). The noise
-    of omega_dot^ enters as ``[d_i x] e`` (errors in variables): it is in R (with the cross-GRS
-    correlation), and its bias on the normal matrix is removed (corrected least squares). d_1, d_2
-    are estimated jointly with their cross-covariance; d_1 - d_2 is reported with its covariance.
-
-    Data and regressors are linear in the scale factors G, so the filter runs on a basis of series
-    (one per component of G) and accumulates their full cross-product: d(G) and dd/dG are then
-    exact for any G, which lets a node follow a running G estimate and still agree with the bulk
-    result. By default d is then estimated jointly with G from every channel
-    (:mod:`.joint`, the full Cramer-Rao bound); ``joint: false`` gives the two-stage
-    ``d(G^)`` with ``P_d = P_d|G + J P_G J^T``.
+- ``paper`` (:class:`PaperComOffsetFilter`): the paper's filter as written (section 3); its covariance is
+  too small (reported, not fixed);
+- ``gls`` (:class:`ComOffsetEstimator`, default): section 5, with an honest covariance (section 6).
 
 One method per file, imports one way (model <- estimator; joint and noise level are leaves):
 

@@ -1,0 +1,78 @@
+"""Stage 6, held out: each reported effect fitted on the first part of the run (2/3 by default) and
+applied, fixed, to the rest, recalibrated there: the shrink and the gain on the held-out part.
+
+An effect that starts mid-run is held out within its own span: the training part is the first part
+after the latest modelled onset (and all before it), the rest is held out.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
+from taiji2_estimator_pkg.diagnosis.evaluation import held_out_deterministic, held_out_noise
+from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
+from taiji2_estimator_pkg.diagnosis.model import NominalModel
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
+from taiji2_estimator_pkg.diagnosis.record import Record, RecordSettings
+from taiji2_estimator_pkg.diagnosis.results import EffectReport
+from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
+from taiji2_estimator_pkg.diagnosis.stages.selection import Selection
+
+__all__ = ["check_held_out"]
+
+
+def check_held_out(inp: DiagnosisInput, nominal: Nominal, selection: Selection, reports: Sequence[EffectReport],
+                   options: DiagnosisOptions, say: Progress) -> list[EffectReport]:
+    """The reports with their held-out entries (unchanged when either part is shorter than a maneuver period)."""
+    full, model, accepted = nominal.full, nominal.start.model, selection.accepted
+    reports = [replace(report) for report in reports]
+    start = max([int(np.searchsorted(inp.t_s, full.onsets[c.key])) for c in accepted if c.key in full.onsets],
+                default=0)
+    split = start + round(options.train_fraction * (inp.n - start))
+    if min(split, inp.n - split) * model.dt_s >= model.maneuver_period_s:
+        say(f"held-out check: fit on the first {split * model.dt_s:.0f} s, apply to the last "
+            f"{(inp.n - split) * model.dt_s:.0f} s")
+        _held_out(inp, split, model, nominal.g, nominal.d, nominal.start.settings, options, nominal.candidates,
+                  nominal.noise, accepted, selection.noise_fit, reports, nominal.start.t_mid, nominal.floor[1],
+                  full.onsets, nominal.start.fixed)
+    return reports
+
+
+def _held_out(inp: DiagnosisInput, split: int, model: NominalModel, g: np.ndarray, d: np.ndarray,
+              settings: RecordSettings, options: DiagnosisOptions, candidates: Sequence[Candidate],
+              noise: NoiseCandidate | None, accepted: Sequence[Candidate | NoiseCandidate],
+              noise_fit: dict[str, float], reports: list[EffectReport], t_mid: float, floor: float,
+              onsets: dict[str, float] | None = None, fixed: Sequence[Any] = ()) -> None:
+    """Fit every reported effect on the training part and apply it to the held-out part."""
+    wanted = {r.key for r in reports}
+    chosen = [c for c in candidates if c.key in wanted or c in accepted]
+    train = Record(inp.slice(0, split), model, g, d, settings, chosen, t_mid, onsets, fixed)
+    test = Record(inp.slice(split, inp.n), model, g, d, settings, chosen, t_mid, onsets, fixed)
+    accepted_det = [c for c in accepted if isinstance(c, Candidate)]
+    edges, period, halfwidth = options.band_edges_hz, model.maneuver_period_s, options.harmonic_halfwidth
+    base = list(train.nuisance) + [name for c in accepted_det for name in c.column_names()]
+    by_key = {c.key: c for c in chosen}
+    noise_report = next((r for r in reports if noise is not None and r.name == noise.name), None)
+    if noise_report is not None:  # both parts whitened without the noise under test
+        data = held_out_noise(train, test, base, edges, period, halfwidth, floor)
+        for key, value in data.items():
+            setattr(noise_report, key, value)
+    kappa = noise_fit.get("kappa", 0.0)
+    if kappa > 0:
+        train.rebuild(kappa)
+        test.rebuild(kappa)
+    for report in reports:
+        candidate = by_key.get(report.key)
+        if candidate is None:
+            continue
+        group = {candidate.key, *report.partners}  # judged with its partners left out (.partners)
+        others = list(train.nuisance) + [name for c in accepted_det if c.key not in group
+                                         for name in c.column_names()]
+        data = held_out_deterministic(train, test, candidate, others, edges, period, halfwidth, floor)
+        for key, value in data.items():
+            setattr(report, key, value)

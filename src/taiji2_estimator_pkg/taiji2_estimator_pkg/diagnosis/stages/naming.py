@@ -1,0 +1,104 @@
+"""The naming rule (between stages 6 and 7): name only the effects that stand on their own.
+
+Stacks of accepted variants of one physical family are tested as one candidate (naming rule 3,
+:func:`_families`); the accepted effects that the held-out data or the stack rule refuse are not
+named (:func:`..standing.standing_verdict`), and where a gap stays unexplained the verdict says
+first where it sits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
+from taiji2_estimator_pkg.diagnosis.locations import Location
+from taiji2_estimator_pkg.diagnosis.record import Record
+from taiji2_estimator_pkg.diagnosis.results import EffectReport
+from taiji2_estimator_pkg.diagnosis.stages.final_scan import FinalModel, describe_locations
+from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
+from taiji2_estimator_pkg.diagnosis.stages.selection import Selection
+from taiji2_estimator_pkg.diagnosis.standing import FAMILY_VARIANTS_MAX, family_group, standing_verdict, subfamily_group
+
+__all__ = ["name_effects"]
+
+
+def name_effects(nominal: Nominal, selection: Selection, final: FinalModel, reports: Sequence[EffectReport]
+                 ) -> tuple[list[EffectReport], dict[str, Any]]:
+    """The reports with the effects the rule refuses marked not accepted, and the final verdict."""
+    reports = [replace(report) for report in reports]
+    verdict = dict(final.verdict)
+    families = _families(nominal.full, nominal.candidates, selection.accepted, selection.current, final.chi2,
+                         nominal.log_n)
+    if families:
+        verdict["families"] = families
+    _apply_naming_rule(verdict, reports, final.remaining)
+    return reports, verdict
+
+
+def _families(full: Record, candidates: Sequence[Candidate], accepted: Sequence[Candidate | NoiseCandidate],
+              current: Sequence[str], chi2_final: float, log_n: float) -> list[dict[str, Any]]:
+    """Stacks of variants of one physical family, tested as one candidate (naming rule 3).
+
+    The family (every variant of it: one GRS's cross-coupling, the three axes of a torque gain) is
+    one candidate with its whole parameter count p in the BIC penalty. A stack of k accepted
+    variants stands as that family when the family is complete (k = p), or when the p - k variants
+    it lacks gain more than ``(p - k) ln N`` in the final model; it is then named once, with its
+    vector of magnitudes and their covariance (the fit with every variant of the family).
+    """
+    out = []
+    for grouping in (family_group, subfamily_group):  # the whole family, then its parts of one physics
+        groups: dict[str, list[Candidate]] = {}
+        for candidate in accepted:
+            if isinstance(candidate, Candidate) and not candidate.is_timing and candidate.variant:
+                groups.setdefault(grouping(candidate.name, candidate.variant), []).append(candidate)
+        standing = {f["family"] for f in out if f["stands"]}
+        for group, members in groups.items():
+            if len(members) <= FAMILY_VARIANTS_MAX or group in {f["family"] for f in out}:
+                continue
+            if grouping is subfamily_group and family_group(members[0].name, members[0].variant) in standing:
+                continue
+            out.append(_family_fit(full, candidates, grouping, group, members, current, chi2_final, log_n))
+    return out
+
+
+def _family_fit(full: Record, candidates: Sequence[Candidate], grouping: Callable[[str, str], str], group: str,
+                members: Sequence[Candidate], current: Sequence[str], chi2_final: float, log_n: float
+                ) -> dict[str, Any]:
+    """One family as one candidate: its fit with every variant, and whether it stands (:func:`_families`)."""
+    family = [c for c in candidates if grouping(c.name, c.variant) == group]
+    missing = [c for c in family if c not in members]
+    extra = [name for c in missing for name in c.column_names()]
+    names = list(current) + extra
+    theta, cov, chi2_family = full.fit(names)
+    member_names = [name for c in family for name in c.column_names()]
+    index = [names.index(name) for name in member_names]
+    without = [name for name in current if name not in member_names]
+    gain = full.chi2(without) - chi2_family
+    p = len(member_names)
+    extra_gain = chi2_final - chi2_family
+    stands = not missing or extra_gain > len(extra) * log_n
+    return {"family": group, "variants": [c.key for c in family], "accepted_variants": [c.key for c in members],
+            "magnitudes": theta[index].tolist(), "covariance": cov[np.ix_(index, index)].tolist(),
+            "sigmas": np.sqrt(np.maximum(np.diag(cov)[index], 0.0)).tolist(), "n_params": p,
+            "delta_chi2": float(gain), "score": float(gain - p * log_n),
+            "delta_chi2_of_the_missing_variants": float(extra_gain), "stands": bool(stands)}
+
+
+def _apply_naming_rule(verdict: dict[str, Any], reports: Sequence[EffectReport], remaining: Sequence[Location]
+                       ) -> None:
+    """Name only the effects that stand on their own; say first where an unexplained gap sits (updates ``verdict``)."""
+    families = [f["family"] for f in verdict.get("families", []) if f["stands"]]
+    named, rejected = standing_verdict(reports, bool(verdict["unexplained"]), families)
+    if not rejected:
+        return
+    names = list(dict.fromkeys(report.name for report in named))
+    cells = [cell for report in reports if report.key in rejected for cell in report.cells]
+    where = describe_locations(remaining) if remaining else describe_locations(cells)
+    summary = f"unexplained gap at {where}"
+    summary += f"; also found: {', '.join(names)}" if names else "; no catalog effect explains it"
+    verdict.update({"effects": names, "unexplained": True, "summary": summary,
+                    "accepted_variants": [report.key for report in named], "rejected": rejected})

@@ -1,0 +1,112 @@
+"""Stage 3, selection (which): forward selection over the candidate variants (:mod:`..candidates`).
+
+Every variant not yet accepted is added to the calibrated model and refitted jointly with G, d and
+the nuisance terms; its likelihood gain is ``delta chi^2`` (``2 delta log L`` for the noise
+candidate), its score ``delta chi^2 - p ln N`` (BIC). The best variant is accepted while its score
+is positive and its gain passes a Bonferroni floor over the candidates; at most
+``options.max_effects`` physical effects (timing effects, each timing family at most once, do not
+count). An accepted effect's second-order signature is relinearised at its fitted magnitude, and
+its onset is modelled when the profile likelihood over the onset says it starts mid-run
+(:mod:`..onset`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES, Candidate, NoiseCandidate
+from taiji2_estimator_pkg.diagnosis.onset import onset_posterior
+from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
+from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
+
+__all__ = ["Selection", "select_effects"]
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Stage 3's result.
+
+    Attributes
+    ----------
+    accepted : list of Candidate or NoiseCandidate
+        Accepted variants, in their order.
+    onsets : dict
+        Variant key -> onset estimate (:func:`..onset.onset_posterior`, with ``modelled``).
+    noise_fit : dict
+        ``kappa``, ``gain``, ``sigma`` of an accepted noise candidate (empty otherwise).
+    current : list of str
+        Columns of the selected model (nuisance, then each accepted variant's).
+    steps : list of dict
+        Forward-selection trace.
+    """
+
+    accepted: list[Candidate | NoiseCandidate]
+    onsets: dict[str, dict[str, Any]]
+    noise_fit: dict[str, float]
+    current: list[str]
+    steps: list[dict[str, Any]]
+
+
+def _physical_count(accepted: list[Candidate | NoiseCandidate]) -> int:
+    return sum(not (isinstance(c, Candidate) and c.is_timing) for c in accepted)
+
+
+def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -> Selection:
+    """Forward selection; relinearises, sets onsets and the noise model in ``nominal.full``."""
+    full, candidates, noise, log_n, floor = (nominal.full, nominal.candidates, nominal.noise, nominal.log_n,
+                                            nominal.floor)
+    say(f"forward selection over {nominal.n_candidates} candidates (which)")
+    accepted: list[Candidate | NoiseCandidate] = []
+    onsets: dict[str, dict[str, Any]] = {}
+    noise_fit: dict[str, float] = {}
+    current = list(nominal.nuisance)
+    _, _, chi2_current = full.fit(current)
+    steps: list[dict[str, Any]] = []
+    for step in range(options.max_effects + len(TIMING_FAMILIES)):
+        evaluations: list[tuple[float, float, Candidate | NoiseCandidate]] = []
+        physical_full = _physical_count(accepted) >= options.max_effects
+        for candidate in candidates:
+            if candidate in accepted or (physical_full and not candidate.is_timing):
+                continue
+            if candidate.series is not None:  # polynomial signature: its exact (series) gain
+                _, chi2_new = full.series_fit(candidate, current)
+            else:
+                chi2_new = full.chi2(current + candidate.column_names())
+            gain = chi2_current - chi2_new
+            evaluations.append((gain - candidate.n_params * log_n, gain, candidate))
+        noise_step = None
+        if noise is not None and noise not in accepted and not physical_full:
+            theta_cur, _, _ = full.fit(current)
+            noise_step = full.noise_gain(full.residual_fft(current, theta_cur))
+            evaluations.append((noise_step[1] - log_n, noise_step[1], noise))
+        evaluations.sort(key=lambda item: -item[0])
+        top = [{"candidate": item[2].key, "delta_chi2": round(item[1], 2), "score": round(item[0], 2)}
+               for item in evaluations[:5]]
+        passing = [item for item in evaluations if item[0] > 0 and item[1] > floor[item[2].n_params]]
+        if not passing:
+            steps.append({"step": step + 1, "accepted": None, "top": top})
+            break
+        score, gain, best = passing[0]
+        accepted.append(best)
+        steps.append({"step": step + 1, "accepted": best.key, "delta_chi2": round(gain, 2), "score": round(score, 2),
+                      "top": top})
+        say(f"step {step + 1}: accepted {best.key} (delta chi2 {gain:.1f}, score {score:.1f})")
+        if isinstance(best, NoiseCandidate) and noise_step is not None:
+            noise_fit = {"kappa": noise_step[0], "gain": noise_step[1], "sigma": noise_step[2]}
+            full.rebuild(noise_step[0])
+        elif isinstance(best, Candidate):
+            full.refine(best, current)  # second-order signatures: relinearise at the fitted magnitude
+            if options.onsets:  # does it start mid-run? (profile likelihood over its onset, .onset)
+                info = onset_posterior(full, best, current)
+                info["modelled"] = bool(info["delta_chi2"] > options.onset_penalty * log_n)
+                if info["modelled"]:
+                    full.set_onset(best, info["value"])
+                    full.refine(best, current)
+                    say(f"  {best.key} starts at {info['value']:.0f} +- {info['sigma']:.0f} s "
+                        f"({info['kind']}; GLR delta chi2 {info['delta_chi2']:.1f})")
+                onsets[best.key] = info
+                steps[-1]["onset_s"] = {"value": info["value"], "sigma": info["sigma"], "modelled": info["modelled"]}
+            current = current + best.column_names()
+        _, _, chi2_current = full.fit(current)
+    return Selection(accepted, onsets, noise_fit, current, steps)

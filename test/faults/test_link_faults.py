@@ -1,0 +1,49 @@
+"""Each link fault ends the run with its verdict, naming the fault, and the not-met exit status (not a stall).
+
+A short link of fast passes (light time 5 s, a 300-s pass every 600 s) over 1,800 s of data: a missed pass,
+a lost first command table (no maneuver flown: the scale factors are never determined, so no d can come),
+and an outage longer than the onboard memory (packets overwritten). Each run must end through the ground's
+own end of data and the estimators' last estimates, not through the runner's stall limit (exit 1), and the
+verdict must name the fault.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from support import run_taiji2
+
+FAST_LINK = """\
+light_time_s: 5.0
+contacts: {period_s: 600.0, first_start_s: 0.0, duration_s: 300.0}
+downlink_rate_bps: 256000.0
+uplink_rate_bps: 2000.0
+packet_overhead_octets: 10
+storage_capacity_octets: %d
+onboard_schedule_capacity: 3000
+command_lead_s: 10.0
+"""
+#: telemetry of the run is ~3,100 octets per simulated s: 600 s of it does not fit this memory
+SMALL_MEMORY_OCTETS = 1_000_000
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("fault", "memory", "named"), [
+    ("missed_contact:1", 10**12, "missed"),
+    ("lost_uplink:0", 10**12, "command table lost on uplink"),
+    ("missed_contact:1", SMALL_MEMORY_OCTETS, "overwritten"),
+])
+def test_a_link_fault_ends_with_a_verdict_that_names_it(tmp_path, fault, memory, named):
+    link = tmp_path / "link.yaml"
+    link.write_text(FAST_LINK % memory)
+    out = tmp_path / "out"
+    proc = run_taiji2("experiment", "--link", str(link), "--duration-s", "1800", "--link-fault", fault,
+                      "--out", str(out), timeout=900)
+    assert proc.returncode in (0, 3), proc.stderr[-3000:]  # 1 would be a failure (a stall), 2 bad input
+    results = json.loads((out / "results.json").read_text())
+    warnings = " | ".join(results["verdict"]["warnings"])
+    assert named in warnings.lower() or named in json.dumps(results["link"]["faults"]).lower(), warnings
+    assert any(w.startswith("link fault:") for w in results["verdict"]["warnings"]), warnings
+    assert (proc.returncode == 0) == results["verdict"]["all_met"]
