@@ -177,7 +177,9 @@ def main(args: argparse.Namespace) -> int:
     at_reference = {"paper_max": float(np.max(paper_ratios)),
                     "paper_binding": PARAMETER_NAMES[int(np.argmax(paper_ratios))],
                     "design_max": float(np.max(ratios)), "design_binding": PARAMETER_NAMES[int(np.argmax(ratios))],
-                    "reduction": float(1.0 - np.max(ratios) / np.max(paper_ratios))}
+                    "reduction": float(1.0 - np.max(ratios) / np.max(paper_ratios)),
+                    # (peak + k sigma) / (margin x range) of the paper's preset: > 1, it leaves the range
+                    "paper_range_excess": constraints.range_excess(problem, paper_usage)}
     final_s, final_maneuver, final_usage, final_bound, final_ratios = reference_s, maneuver, usage, bound, ratios
     verified = True
     if args.minimize_duration:
@@ -232,7 +234,11 @@ def main(args: argparse.Namespace) -> int:
     print(f"design {layout} {args.family}: max CRLB/requirement at {reference_s:.0f} s: design "
           f"{at_reference['design_max']:.3f} ({at_reference['design_binding']}) vs paper "
           f"{at_reference['paper_max']:.3f} ({at_reference['paper_binding']}), reduction "
-          f"{at_reference['reduction']:.1%}; every requirement met at {report['shortest_duration_s'] / 3600:.2f} h "
+          f"{at_reference['reduction']:.1%}"
+          + (f" (the paper's preset leaves the range constraint: peak + {constraints.range_sigmas:g} sigma = "
+             f"{at_reference['paper_range_excess']:.2f} x margin x range)" if at_reference['paper_range_excess'] > 1.0
+             else "")
+          + f"; every requirement met at {report['shortest_duration_s'] / 3600:.2f} h "
           f"(paper {report['paper']['shortest_duration_all_met_s'] / 3600:.2f} h); binding constraint {binding}; "
           f"{maneuver_path}, {out / 'report.md'} ({report['wall_s']:.0f} s)")
     if result.truncated:
