@@ -63,3 +63,28 @@ def cpu_bound_processes(n: int = 2) -> Iterator[list[subprocess.Popen]]:
         for hog in hogs:
             hog.kill()
             hog.wait()
+
+
+def unclipped_readout_patch():
+    """A MonkeyPatch context in which every layout loads with ``grs.readout_saturation: false``.
+
+    For the suites that study the estimators and the diagnosis on the paper's preset: with every noise on,
+    that maneuver leaves the GRS range in about 15 % of the samples (docs/physics_model.md section 8), and
+    these suites were made for (and test) the unclipped readout; the study switch keeps their data
+    bitwise what they were. In-process only (a subprocess loads its layouts as they are).
+    """
+    import dataclasses
+
+    import pytest
+
+    from taiji2_model import config
+
+    original = config._parse_grs
+
+    def parse(section):
+        return dataclasses.replace(original(section), readout_saturation=False)
+
+    patch = pytest.MonkeyPatch()
+    patch.setattr(config, "_parse_grs", parse)
+    assert config.load_config("type1").grs.readout_saturation is False
+    return patch

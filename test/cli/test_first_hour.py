@@ -113,16 +113,20 @@ def test_experiment_default_maneuver_is_the_shipped_design_and_paper_is_the_pres
 
     plan = plan_experiment("type1", "", None, None, [], 1, "gls")
     assert plan.maneuver_kind == "design" and plan.maneuver_file.endswith("maneuvers/type1.yaml")
-    assert plan.duration_s == 10800.0 and plan.maneuver_covers_run
+    assert plan.duration_s == 12909.0 and plan.maneuver_covers_run  # 3.59 h: inside the GRS range with the noise
     assert plan.commander_parameters() == ["-p", f"maneuver_file:={plan.maneuver_file}"]
     paper = plan_experiment("type1", "", "paper", 20000.0, [], 1, "gls")
     assert paper.maneuver_kind == "paper" and paper.maneuver_file is None
     # the preset flies the whole run (it stopped at 3 h before)
     assert paper.commander_parameters() == ["-p", "duration_s:=20000.0"] and paper.maneuver_covers_run
-    # type2 ships no design: its default is the paper's preset; asking for a design says what to do
-    assert plan_experiment("type2", "", None, None, [], 1, "gls").maneuver_kind == "paper"
-    with pytest.raises(ValueError, match=r"no shipped design for layout 'type2'.*taiji2 design"):
-        plan_experiment("type2", "", "design", None, [], 1, "gls")
+    # type2 ships a design too (10.45 h); a config file of one's own gets the paper's preset
+    type2 = plan_experiment("type2", "", None, None, [], 1, "gls")
+    assert type2.maneuver_kind == "design" and type2.maneuver_file.endswith("maneuvers/type2.yaml")
+    assert type2.duration_s == 37631.0
+    from taiji2_model.config import builtin_layouts
+
+    assert plan_experiment("type2", str(builtin_layouts()["type2"]), None, None, [], 1, "gls").maneuver_kind == \
+        "paper"
 
 
 # -- row 4: error messages in the user's terms -----------------------------------------------------------

@@ -151,21 +151,21 @@ def experiment_verdict(plan: ExperimentPlan, table: Any, layout: str, diagnostic
     import numpy as np
 
     from taiji2_apps.design.evaluate import DesignProblem, requirement_ratios
-    from taiji2_estimator_pkg.verdict import judge, range_warning
+    from taiji2_estimator_pkg.verdict import RangeCheck, judge
 
     problem = DesignProblem(plan.config.to_dict())
     bound = requirement_ratios(_bound(problem, plan))
     design_peak = float(np.max(problem.usage(plan.maneuver, min(plan.duration_s, _FULL_BOUND_MAX_S)).range_fraction))
     warnings = []
+    range_check = None
     for name, status in sorted(diagnostics.items()):
         values = {kv.key: kv.value for kv in status.values}
         if name == "spacecraft_sim: GRS linear range":
             try:
-                line = range_warning({k: json.loads(v) for k, v in values.items()}, design_peak)
-            except (KeyError, ValueError):
-                line = f"simulator: {status.message}"
-            if line:
-                warnings.append(line)
+                range_check = RangeCheck.from_values({k: json.loads(v) for k, v in values.items()}, design_peak,
+                                                     bool(plan.config.grs.readout_saturation))
+            except (KeyError, ValueError, TypeError):
+                warnings.append(f"simulator: {status.message}")
         elif _level(status.level) > 0:
             warnings.append(f"{name}: {status.message}")
     option = f"--layout {layout}" if plan.source == layout else f"--config {plan.source}"
@@ -179,5 +179,12 @@ def experiment_verdict(plan: ExperimentPlan, table: Any, layout: str, diagnostic
 
         if plan.source == layout and builtin_maneuver_file(layout):
             remedy += f"; or the shipped design, the default: taiji2 experiment --layout {layout}"
+    range_remedy = (f"a maneuver inside the range with the noise: taiji2 design {option} --minimize-duration (its "
+                    "default keeps the maneuver's peak + 3.29 sigma of the readout noise inside the range)")
+    from taiji2_model.maneuver_families import builtin_maneuver_file
+
+    if plan.source == layout and builtin_maneuver_file(layout) and plan.maneuver_kind != "design":
+        range_remedy += f", or the shipped design, the default: taiji2 experiment --layout {layout}"
     return judge(table, bound, plan.duration_s, plan.maneuver_label, remedy=remedy,
-                 maneuver_covers_run=plan.maneuver_covers_run, warnings=warnings)
+                 maneuver_covers_run=plan.maneuver_covers_run, warnings=warnings, range_check=range_check,
+                 range_remedy=range_remedy)

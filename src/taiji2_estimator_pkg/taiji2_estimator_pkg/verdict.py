@@ -12,6 +12,13 @@ that is not met is put in the first of these classes that applies:
 * ``chance``: bound and 1-sigma are within, the error of this run is not (a draw beyond the
   requirement; another seed or a longer run).
 
+The GRS linear range is a requirement too (the paper: the linear acceleration of the calibration
+experiment combined with the background noise must fall within the measurable range of the GRS):
+where the simulator's range check is known (:class:`RangeCheck`), it is met when on every GRS and
+TMRF axis at most :data:`RANGE_FRACTION_LIMIT` of the samples of the linear readout, signal plus
+every noise source, lie beyond the range. Beyond it the readout saturates (the simulator clips it
+there unless ``grs.readout_saturation`` is off); a violation is an unmet requirement like any other.
+
 Plain data (no middleware): built from an :class:`~taiji2_estimator_pkg.report.EstimateTable`, the
 bound (:func:`taiji2_estimator_pkg.core.crlb.crlb`) and the simulator's diagnostics.
 """
@@ -26,7 +33,7 @@ import numpy as np
 
 from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL, EstimateTable
 
-__all__ = ["ParameterCheck", "Verdict", "judge", "range_warning"]
+__all__ = ["RANGE_FRACTION_LIMIT", "ParameterCheck", "RangeCheck", "Verdict", "judge", "range_warning"]
 
 _G_NAMES = ("G_Pphi", "G_Ptheta", "G_Ppsi")
 _D_NAMES = ("d_x", "d_y", "d_z")
@@ -34,6 +41,9 @@ _D_NAMES = ("d_x", "d_y", "d_z")
 _SIGMA_OVER_BOUND = (0.8, 1.25)
 #: |error| / 1-sigma beyond this is named as inconsistent
 _ERROR_SIGMAS = 3.0
+RANGE_FRACTION_LIMIT = 1e-3
+"""Largest fraction of the samples of one GRS TMRF axis whose linear readout (signal + every noise)
+may lie beyond the range for the range requirement to be met (0.1 %)."""
 
 
 @dataclass(frozen=True)
@@ -77,6 +87,84 @@ class ParameterCheck:
         return f"{value:.0f} um" if self.unit == "um" else f"{value:.3f} %"
 
 
+@dataclass(frozen=True)
+class RangeCheck:
+    """The GRS linear range requirement, from the simulator's range check.
+
+    Attributes
+    ----------
+    range_m_s2 : float
+        The range, +-range [m s^-2].
+    samples : int
+        Samples checked.
+    samples_outside : numpy.ndarray
+        (2, 3) per GRS and TMRF axis: samples whose linear readout (signal + every noise) is beyond.
+    total_peak : numpy.ndarray
+        (2, 3) peak |linear readout| / range.
+    maneuver_peak : numpy.ndarray
+        (2, 3) peak |rotation-induced part| / range (with the torque noise's rotation).
+    design_peak : float, optional
+        Peak of the noise-free maneuver part / range (the design's figure).
+    saturation : bool, optional
+        The simulator clipped the readout at the range (``grs.readout_saturation``); None: unknown.
+    limit : float
+        Largest allowed fraction of the samples beyond, per axis.
+    """
+
+    range_m_s2: float
+    samples: int
+    samples_outside: np.ndarray
+    total_peak: np.ndarray
+    maneuver_peak: np.ndarray
+    design_peak: float | None = None
+    saturation: bool | None = None
+    limit: float = RANGE_FRACTION_LIMIT
+
+    @classmethod
+    def from_values(cls, values: Mapping[str, Any], design_peak: float | None = None,
+                    saturation: bool | None = None, limit: float = RANGE_FRACTION_LIMIT) -> RangeCheck:
+        """From the simulator's ``GRS linear range`` diagnostic values (see :func:`range_warning`)."""
+        total = np.asarray(values["total_peak_fraction_of_range"], dtype=float)
+        return cls(float(values["range_m_s2"]), int(values.get("samples", 0)),
+                   np.asarray(values.get("total_samples_outside", np.zeros_like(total)), dtype=float), total,
+                   np.asarray(values["maneuver_peak_fraction_of_range"], dtype=float), design_peak, saturation,
+                   float(limit))
+
+    @property
+    def fraction(self) -> np.ndarray:
+        """(2, 3) fraction of the samples beyond the range per GRS and TMRF axis."""
+        return np.asarray(self.samples_outside, dtype=float) / max(self.samples, 1)
+
+    @property
+    def met(self) -> bool:
+        """At most ``limit`` of the samples of every axis beyond the range."""
+        return bool(np.max(self.fraction) <= self.limit)
+
+    def summary(self) -> str:
+        """``0.02 % of the samples beyond +-1e-09 m/s^2 (GRS1 z), peak 104 % (GRS1 z)``."""
+        worst, worst_at = _where(self.fraction)
+        peak, peak_at = _where(self.total_peak)
+        return (f"{worst:.2%} of the samples beyond +-{self.range_m_s2:.0e} m/s^2 ({worst_at}), peak {peak:.0%} "
+                f"({peak_at})")
+
+    def line(self) -> str:
+        """The reason line of an unmet range requirement."""
+        text = range_warning({"range_m_s2": self.range_m_s2, "samples": self.samples,
+                              "maneuver_peak_fraction_of_range": self.maneuver_peak,
+                              "total_peak_fraction_of_range": self.total_peak,
+                              "total_samples_outside": self.samples_outside}, self.design_peak, self.saturation)
+        return (f"GRS linear range not met (at most {self.limit:.1%} of the samples of each TM axis beyond it): "
+                + (text or self.summary()).removeprefix("simulator: "))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {"met": self.met, "range_m_s2": self.range_m_s2, "samples": self.samples,
+                "limit_fraction_outside": self.limit, "fraction_outside": self.fraction.tolist(),
+                "total_peak_fraction_of_range": np.asarray(self.total_peak).tolist(),
+                "maneuver_peak_fraction_of_range": np.asarray(self.maneuver_peak).tolist(),
+                "design_peak_fraction_of_range": self.design_peak, "saturation": self.saturation}
+
+
 @dataclass
 class Verdict:
     """The verdict of one experiment (see the module doc)."""
@@ -87,11 +175,20 @@ class Verdict:
     remedy: str = ""
     maneuver_covers_run: bool = True
     warnings: list[str] = field(default_factory=list)
+    range_check: RangeCheck | None = None
+    range_remedy: str = ""
 
     @property
     def all_met(self) -> bool:
-        """Every requirement met."""
-        return all(c.status == "met" for c in self.checks)
+        """Every requirement met: the 12 parameters and, where known, the GRS linear range."""
+        return all(c.status == "met" for c in self.checks) and (self.range_check is None or self.range_check.met)
+
+    @property
+    def _requirements(self) -> str:
+        text = "G to 0.3 %, d to 100 um, 1 sigma, both GRS"
+        if self.range_check is not None:
+            text += f"; GRS linear range, <= {self.range_check.limit:.1%} of the samples beyond"
+        return text
 
     def _named(self, status: str) -> list[ParameterCheck]:
         return [c for c in self.checks if c.status == status]
@@ -100,10 +197,12 @@ class Verdict:
         """Human-readable: the verdict line, one line per reason, then the warnings."""
         hours = f"{self.duration_s / 3600:.2f} h"
         n, met = len(self.checks), len(self._named("met"))
+        if self.range_check is not None:
+            n, met = n + 1, met + int(self.range_check.met)
         out = []
         if self.all_met:
             worst = max(self.checks, key=lambda c: c.sigma)
-            text = (f"verdict: all {n} requirements met (G to 0.3 %, d to 100 um, 1 sigma, both GRS) with "
+            text = (f"verdict: all {n} requirements met ({self._requirements}) with "
                     f"{self.maneuver} in {hours}: largest 1-sigma {worst.name} {worst.amount(worst.sigma)} = "
                     f"{worst.sigma:.2f} of its requirement")
             if not np.isnan(worst.bound):
@@ -112,11 +211,19 @@ class Verdict:
             if errors:
                 largest = max(errors, key=lambda c: abs(c.error))
                 text += f"; largest error {largest.name} {largest.amount(abs(largest.error))}"
+            if self.range_check is not None:
+                text += f"; GRS range: {self.range_check.summary()}"
             out.append(text)
         else:
             missed = [c.name for c in self.checks if c.status != "met"]
-            out.append(f"verdict: {met} of {n} requirements met (G to 0.3 %, d to 100 um, 1 sigma, both GRS) with "
+            if self.range_check is not None and not self.range_check.met:
+                missed.append("GRS linear range")
+            out.append(f"verdict: {met} of {n} requirements met ({self._requirements}) with "
                        f"{self.maneuver} in {hours}" + (f"; not met: {', '.join(missed)}" if len(missed) <= 4 else ""))
+        if self.range_check is not None and not self.range_check.met:
+            out.append(f"  {self.range_check.line()}")
+            if self.range_remedy:
+                out.append(f"  what to do about the range: {self.range_remedy}")
         cannot = self._named("cannot")
         if cannot:
             worst = max(cannot, key=lambda c: c.bound if not np.isnan(c.bound) else c.sigma)
@@ -176,7 +283,8 @@ class Verdict:
                 **{s: [c.name for c in self._named(s)] for s in ("met", "cannot", "estimator", "chance")},
                 "over_requirement": {c.name: {"sigma": num(c.sigma), "bound": num(c.bound), "error": num(c.error)}
                                      for c in self.checks},
-                "remedy": self.remedy, "warnings": list(self.warnings)}
+                "remedy": self.remedy, "warnings": list(self.warnings),
+                "range": None if self.range_check is None else self.range_check.to_dict()}
 
 
 def _sigma(cov: np.ndarray) -> np.ndarray:
@@ -184,7 +292,8 @@ def _sigma(cov: np.ndarray) -> np.ndarray:
 
 
 def judge(table: EstimateTable, bound: Sequence[float] | None, duration_s: float, maneuver: str, *,
-          remedy: str = "", maneuver_covers_run: bool = True, warnings: Sequence[str] = ()) -> Verdict:
+          remedy: str = "", maneuver_covers_run: bool = True, warnings: Sequence[str] = (),
+          range_check: RangeCheck | None = None, range_remedy: str = "") -> Verdict:
     """The verdict of ``table``.
 
     Parameters
@@ -204,7 +313,11 @@ def judge(table: EstimateTable, bound: Sequence[float] | None, duration_s: float
     maneuver_covers_run : bool
         The maneuver lasts the whole run (then a longer run of it lowers the bound as 1/sqrt(T)).
     warnings : sequence of str
-        Lines to append (the simulator's range report and other warnings).
+        Lines to append (the simulator's warnings).
+    range_check : RangeCheck, optional
+        The simulator's range check: the GRS linear range requirement (None: unknown, not judged).
+    range_remedy : str
+        What to do about an unmet range requirement.
     """
     bound_arr = np.full(12, np.nan) if bound is None else np.asarray(bound, dtype=float)
     checks = []
@@ -224,7 +337,8 @@ def judge(table: EstimateTable, bound: Sequence[float] | None, duration_s: float
             checks.append(ParameterCheck(f"grs{r.grs_id}.{_D_NAMES[k]}", float(d_sig[k]),
                                          float(bound_arr[6 * i + 3 + k]), float(d_err[k]),
                                          COM_OFFSET_REQUIREMENT_M * 1e6, "um"))
-    return Verdict(checks, float(duration_s), maneuver, remedy, maneuver_covers_run, list(warnings))
+    return Verdict(checks, float(duration_s), maneuver, remedy, maneuver_covers_run, list(warnings), range_check,
+                   range_remedy)
 
 
 def _where(fractions: np.ndarray) -> tuple[float, str]:
@@ -232,7 +346,8 @@ def _where(fractions: np.ndarray) -> tuple[float, str]:
     return float(fractions[g, axis]), f"GRS{g + 1} {'xyz'[axis]}"
 
 
-def range_warning(values: Mapping[str, Any], design_peak: float | None = None) -> str | None:
+def range_warning(values: Mapping[str, Any], design_peak: float | None = None,
+                  saturation: bool | None = None) -> str | None:
     """One line from the simulator's ``GRS linear range`` diagnostic values; None: inside the range.
 
     Parameters
@@ -243,6 +358,8 @@ def range_warning(values: Mapping[str, Any], design_peak: float | None = None) -
         publishes them.
     design_peak : float, optional
         Peak of the noise-free maneuver part / range (the design's figure).
+    saturation : bool, optional
+        Whether the simulator clipped the readout at the range (None: unknown).
     """
     total = np.asarray(values["total_peak_fraction_of_range"], dtype=float)
     rotation = np.asarray(values["maneuver_peak_fraction_of_range"], dtype=float)
@@ -260,7 +377,9 @@ def range_warning(values: Mapping[str, Any], design_peak: float | None = None) -
         return text + (f": the maneuver itself drives it out (rotation part {rot_peak:.0%}, {rot_at}); lower its "
                        "amplitude, or let taiji2 design choose one inside the range")
     alone = "" if design_peak is None else f"{design_peak:.0%} noise-free, "
+    clipped = ("clipped there in the simulation, as a real GRS saturates" if saturation else
+               "not clipped in the simulation (grs.readout_saturation: false), a real GRS would saturate there"
+               if saturation is False else "a real GRS saturates there")
     return text + (f": noise (thruster force noise) on top of the maneuver, which peaks at {alone}{rot_peak:.0%} with "
-                   "the torque noise; not clipped in the simulation, a real GRS would saturate there "
-                   "(docs/physics_model.md section 8). Room for the noise: taiji2 design --range-margin 0.6 "
-                   "(a longer run)")
+                   f"the torque noise; {clipped} (docs/physics_model.md section 8). Room for the noise: taiji2 design, "
+                   "whose default keeps the maneuver's peak + 3.29 sigma of the noise inside the range (a longer run)")

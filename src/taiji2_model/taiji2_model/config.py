@@ -314,6 +314,11 @@ def _parse_spacecraft(section: _Section) -> SpacecraftConfig:
 def _parse_grs(section: _Section) -> GrsAssemblyConfig:
     alpha_deg = section.number("alpha_deg")
     range_m_s2 = section.number("range_m_s2", positive=True)
+    saturation = section.optional("readout_saturation")
+    if saturation is None:
+        saturation = True
+    elif not isinstance(saturation, bool):
+        raise ConfigError(section.name("readout_saturation"), f"must be true or false, got {saturation!r}")
     tm_mass_kg = section.number("tm_mass_kg", positive=True)
     tm_side_m = section.number("tm_side_m", positive=True)
     lever_arm_m = section.number("electrode_lever_arm_m", positive=True)
@@ -340,7 +345,7 @@ def _parse_grs(section: _Section) -> GrsAssemblyConfig:
         sensors.append(GrsConfig(index + 1, com_offset_m, angular, linear))
     section.finish()
     return GrsAssemblyConfig(alpha_deg, range_m_s2, tm_mass_kg, tm_side_m, lever_arm_m,
-                             (sensors[0], sensors[1]))
+                             (sensors[0], sensors[1]), saturation)
 
 
 def _parse_maneuver(section: _Section) -> ManeuverConfig:

@@ -148,6 +148,9 @@ class GrsAssemblyConfig:
         Lever arm l of the electrostatic torque [m]; r = a^2 / (6 l).
     sensors : tuple of GrsConfig
         GRS1 and GRS2, in this order.
+    readout_saturation : bool
+        Switch: the linear readout ``G_P,lin (v1 + v2)`` of every axis saturates (is clipped) at
+        +-``range_m_s2`` (default true; false: unclipped, for studies).
     """
 
     alpha_deg: float
@@ -156,6 +159,7 @@ class GrsAssemblyConfig:
     tm_side_m: float
     electrode_lever_arm_m: float
     sensors: tuple[GrsConfig, GrsConfig]
+    readout_saturation: bool = True
 
     @property
     def alpha_rad(self) -> float:

@@ -22,6 +22,7 @@ __all__ = [
     "accelerations_from_voltages",
     "coupling_acceleration_m_s2",
     "linear_scale_factors_from_angular",
+    "saturate_linear_readout",
     "voltages_from_accelerations",
 ]
 
@@ -168,3 +169,37 @@ def accelerations_from_voltages(voltages_v: ArrayLike, angular_scale_factors: Ar
     angular = np.asarray(angular_scale_factors, dtype=np.float64) * difference_v[..., [1, 2, 0]]
     linear = np.asarray(linear_scale_factors, dtype=np.float64) * sum_v
     return angular, linear
+
+
+def saturate_linear_readout(voltages_v: np.ndarray, linear_scale_factors: ArrayLike, range_m_s2: float) -> np.ndarray:
+    """Clip the linear readout of every axis at the range, in place: the GRS saturates there.
+
+    On each electrode axis the sum ``s = v1 + v2`` (the linear readout ``G_P,lin s``) is limited to
+    ``|G_P,lin s| <= range``; both channels move by half the excess, so the difference ``v1 - v2``
+    (the angular readout) is unchanged. Samples inside the range are untouched (bitwise).
+
+    Parameters
+    ----------
+    voltages_v : numpy.ndarray
+        (..., 6) vx1, vx2, vy1, vy2, vz1, vz2 [V], writeable; modified in place.
+    linear_scale_factors : array_like
+        (..., 3) true (G_Px, G_Py, G_Pz) [m s^-2 V^-1], broadcastable to ``voltages_v[..., :3]``.
+    range_m_s2 : float
+        The range, +-range [m s^-2].
+
+    Returns
+    -------
+    numpy.ndarray
+        ``voltages_v``.
+    """
+    first = voltages_v[..., 0::2]  # vx1, vy1, vz1 (views)
+    second = voltages_v[..., 1::2]
+    total = first + second
+    limit = range_m_s2 / np.abs(np.asarray(linear_scale_factors, dtype=np.float64))
+    excess = total - np.clip(total, -limit, limit)
+    outside = excess != 0.0
+    if np.any(outside):
+        half = 0.5 * excess
+        first -= np.where(outside, half, 0.0)
+        second -= np.where(outside, half, 0.0)
+    return voltages_v

@@ -26,6 +26,7 @@ __all__ = [
     "NoiseDraws",
     "NoiseStreams",
     "OrnsteinUhlenbeckParameters",
+    "linear_readout_noise_std_m_s2",
     "noise_rng",
     "srp_asd_m_s2_rthz",
     "srp_ou_parameters",
@@ -287,3 +288,62 @@ def voltage_channel_std_v(linear_equivalent_asd_m_s2_rthz: float, linear_scale_f
     """
     per_axis_asd_v = linear_equivalent_asd_m_s2_rthz / (math.sqrt(2.0) * np.asarray(linear_scale_factors))
     return white_noise_std(np.repeat(per_axis_asd_v, 2), sample_rate_hz)
+
+
+def linear_readout_noise_std_m_s2(config: SimConfig) -> np.ndarray:
+    """Per-sample standard deviation of the noise on each GRS linear readout, every enabled source.
+
+    What the range of the readout has to accommodate on top of the maneuver (the paper: "the linear
+    acceleration of the calibration experiment combined with the background noise must fall within
+    the measurable range of the GRS"), per sample of the fs readout, by source:
+
+    - thruster force noise ``F / M`` and SRP on ``a_SC`` (CRF, rotated by ``C_i``);
+    - thruster torque noise through the mean angular acceleration of the step, ``J^-1 tau``, and the
+      lever arm: ``C_i (J^-1 tau) x d_i`` (its slow drift of the rate, ``omega x (omega x d)``, is
+      below 1e-6 of the range over days and left out);
+    - LFS translational, TM environment (TMRF, per axis) and the electrode voltage noise of the sum
+      pair (linear equivalent).
+
+    White sources have ``S sqrt(fs / 2)`` per sample, SRP its stationary standard deviation.
+
+    Parameters
+    ----------
+    config : SimConfig
+        Layout (noise budget and switches, inertia, mass, d_i, C_i, sample rate).
+
+    Returns
+    -------
+    numpy.ndarray
+        (sensors, 3) per GRS and TMRF axis [m s^-2].
+    """
+    from taiji2_model.frames import crf_to_tmrf
+
+    noise = config.noise
+    fs = config.sample_rate_hz
+    a_sc_cov = np.zeros((3, 3))
+    if noise.thruster_force.enabled:
+        a_sc_cov += np.diag((white_noise_std(noise.thruster_force.asd, fs) / config.spacecraft.mass_kg) ** 2
+                            * np.ones(3))
+    if noise.srp.enabled:
+        a_sc_cov += np.eye(3) * srp_ou_parameters(noise.srp, fs).stationary_std ** 2
+    torque_cov = np.zeros((3, 3))
+    if noise.thruster_torque.enabled:
+        torque_cov = np.diag(white_noise_std(noise.thruster_torque.asd, fs) ** 2 * np.ones(3))
+    inertia_inv = np.linalg.inv(np.asarray(config.spacecraft.inertia_kg_m2, dtype=np.float64))
+    omega_dot_cov = inertia_inv @ torque_cov @ inertia_inv.T
+    out = np.empty((len(config.grs.sensors), 3))
+    for index, sensor in enumerate(config.grs.sensors):
+        d = np.asarray(sensor.com_offset_m, dtype=np.float64)
+        # omega_dot x d = -[d]x omega_dot
+        skew = np.array([[0.0, -d[2], d[1]], [d[2], 0.0, -d[0]], [-d[1], d[0], 0.0]])
+        crf_cov = a_sc_cov + skew @ omega_dot_cov @ skew.T
+        c = crf_to_tmrf(sensor.grs_id, config.grs.alpha_rad)
+        variance = np.diag(c @ crf_cov @ c.T).copy()
+        for name in ("lfs_translational", "tm_environment"):
+            source = getattr(noise, name)
+            if source.enabled:
+                variance += white_noise_std(source.asd, fs) ** 2 * np.ones(3)
+        if noise.grs_voltage.enabled:
+            variance += float(white_noise_std(noise.grs_voltage.linear_equivalent_asd_m_s2_rthz, fs)) ** 2
+        out[index] = np.sqrt(variance)
+    return out

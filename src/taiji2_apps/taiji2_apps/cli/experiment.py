@@ -245,4 +245,9 @@ def _report(args: argparse.Namespace, plan: Any, monitor: _Monitor, out: Path, t
         print(f"\n{args.duration_s:g} s simulated in {elapsed:.1f} s wall "
               f"({args.duration_s / elapsed:.0f}x real time); {kept}\n")
         print("\n".join(verdict.lines()))
+    return verdict_status(verdict)
+
+
+def verdict_status(verdict: Any) -> ExitStatus:
+    """OK when every requirement (the 12 parameters and the GRS linear range) is met, else NOT_MET (3)."""
     return ExitStatus.OK if verdict.all_met else ExitStatus.NOT_MET

@@ -11,7 +11,8 @@ W >= 1000 s it is 1-2 % at the paper's preset (tested against the whole-duration
 reported number of a final design is the whole-duration bound.
 
 Usage is taken from the noise-free simulation of the whole duration (``SimOutput`` truth):
-peak maneuver-induced linear acceleration per GRS and TMRF axis (as the simulator's range check),
+peak maneuver-induced linear acceleration per GRS and TMRF axis (the range constraint adds k sigma
+of the readout noise of each axis to it, :attr:`DesignProblem.noise_fraction`),
 peak thrust per axis ``|tau| / L``, and peak small-angle attitude excursion per CRF axis.
 """
 
@@ -97,6 +98,10 @@ class DesignProblem:
         self.max_thrust_n = float(thrusters.max_thrust_n)
         self.range_m_s2 = float(self.config.grs.range_m_s2)
         self.dt_s = float(self.config.dt_s)
+        from taiji2_model.noise import linear_readout_noise_std_m_s2
+
+        #: (2, 3) per-sample 1-sigma of the noise on each linear readout (every enabled source) / range
+        self.noise_fraction = linear_readout_noise_std_m_s2(self.config) / self.range_m_s2
 
     def paper_maneuver(self, duration_s: float) -> Any:
         """The layout's preset square wave over ``duration_s``."""

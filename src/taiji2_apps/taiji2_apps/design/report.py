@@ -110,8 +110,10 @@ def write_report(out: Path, report: dict, plots: bool = True) -> None:
     c = report["constraints"]
     lines = [f"# Maneuver design: {report['layout']}, family {report['family']}", "",
              f"Objective: the largest CRLB / requirement over the 12 parameters (G 0.3 %, d 100 um, 1 sigma), "
-             f"full Cramer-Rao bound of G and d jointly from every channel (core/crlb.py). Constraints: range margin "
-             f"{report['constraints']['range_margin']:.0%} of +-{report['constraints']['range_m_s2']:.1e} m/s^2, "
+             f"full Cramer-Rao bound of G and d jointly from every channel (core/crlb.py). Constraints: noise-free "
+             f"maneuver peak + {c.get('range_sigmas', 0.0):g} sigma of the readout noise (every source) within "
+             f"{report['constraints']['range_margin']:.0%} of +-{report['constraints']['range_m_s2']:.1e} m/s^2 "
+             f"on every TM axis, "
              f"thrust {c['min_thrust_n'] * 1e6:.3g}-{c['max_thrust_n'] * 1e6:.3g}"
              f" uN at lever arm {report['constraints']['lever_arm_m']:g} m, attitude <= "
              f"{report['constraints']['max_attitude_rad']:g} rad. Binding constraint of the design: "

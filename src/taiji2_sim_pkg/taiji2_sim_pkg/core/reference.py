@@ -12,7 +12,8 @@ model. The reference simulator shares only the physics and the noise budget (pap
 - GRS: the internal-rate accelerations through a linear-phase anti-alias FIR (Kaiser-windowed
   sinc, cut-off 0.4 fs, 81 taps at 200 Hz) and decimated to fs; the sample whose filter is centred
   on ``c`` is stamped ``c + dt/2 + grs_stamp`` (the low-frequency timing of the ``end`` convention,
-  shifted by the configured stamp offset); readout and voltage noise then at fs;
+  shifted by the configured stamp offset); readout and voltage noise then at fs; the linear
+  readout saturates at the range (``grs.readout_saturation``), as in the standard simulator;
 - star tracker: the attitude averaged over an exposure (default one sample interval) centred on
   ``stamp - star_tracker_stamp_offset_s``, plus its white error.
 
@@ -43,7 +44,7 @@ from taiji2_model.frames import (
     quat_multiply,
     rotvec_from_quat,
 )
-from taiji2_model.grs import coupling_acceleration_m_s2, voltages_from_accelerations
+from taiji2_model.grs import coupling_acceleration_m_s2, saturate_linear_readout, voltages_from_accelerations
 from taiji2_model.noise import NoiseStreams, noise_rng, srp_ou_parameters, white_noise_std
 from taiji2_model.timing import actuated_commands
 from taiji2_sim_pkg.core.dynamics import AttitudeSteps, propagate_attitude
@@ -229,6 +230,8 @@ def simulate_reference(config: SimConfig, seed: int, torque_cmd_n_m: ArrayLike, 
         volts = volts + readout_noise.grs_voltage_v[:, index]
         for effect in effects:
             volts = effect.grs_voltages_v(stamps, sensor.grs_id, volts)
+        if config.grs.readout_saturation:  # the readout rails, after every effect (as the standard simulator)
+            volts = saturate_linear_readout(np.array(volts, dtype=np.float64), linear_sf, config.grs.range_m_s2)
         voltages[:, index] = volts
         com_at_stamps = np.broadcast_to(com_offset, (fine_count, 3))[pad * sub + sub - 1:: sub][:n]
         for key, value in (("angular_true", angular_true), ("linear_true", linear_true),

@@ -6,7 +6,10 @@ One step advances from t_k to t_{k+1} = t_k + 1/fs with the commanded torque hel
 - star tracker: instantaneous attitude at t_{k+1} with white error;
 - GRS (integrating readout): the mean over the step, angular ``C_i (omega_{k+1} - omega_k)/dt``
   and linear ``C_i (a_SC,k + omega_dot x d_i + w_m x (w_m x d_i))``, plus readout noise, converted
-  to the six electrode voltages through the true scale factors, plus voltage noise.
+  to the six electrode voltages through the true scale factors, plus voltage noise; the linear
+  readout ``G_P,lin (v1 + v2)`` then saturates at +-``grs.range_m_s2`` (switch
+  ``grs.readout_saturation``, default on; :func:`taiji2_model.grs.saturate_linear_readout`). The
+  truth field ``grs_linear_meas`` keeps the unclipped acceleration, what the range check counts.
 
 Timing conventions (``config.timing`` and the timing effects; :mod:`.timing`) are implemented on
 the way in and out: the command drives the thrusters through the exact fractional delay and
@@ -31,6 +34,7 @@ from numpy.typing import ArrayLike
 from taiji2_model.config import SimConfig, TimingConfig
 from taiji2_model.effects import Effect
 from taiji2_model.frames import crf_to_tmrf
+from taiji2_model.grs import saturate_linear_readout
 from taiji2_model.maneuver import SquareWaveManeuver
 from taiji2_model.noise import NoiseStreams
 from taiji2_model.timing import actuation_weights, apply_actuation
@@ -404,6 +408,8 @@ class Simulator:
             for effect in self._hooks:
                 quat = effect.star_tracker_quat_xyzw(t_end[window], quat)
             st_quat[window] = quat
+        if config.grs.readout_saturation:  # the readout rails: after every effect, as the electronics
+            saturate_linear_readout(grs["voltages"], grs["linear_sf"], config.grs.range_m_s2)
 
         self._omega = attitude.omega_rad_s[-1].copy()
         self._step_index += count
