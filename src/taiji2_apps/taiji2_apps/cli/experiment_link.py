@@ -390,8 +390,8 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
     graph = Graph(nodes, out, done=done, progress=progress,
                   wait=lambda s: spin_for(executor, s, lambda: monitor.taken), timeout_s=args.timeout_s,
                   poll_s=MONITOR_PERIOD_S, stall_s=STALL_S, stall_message=stalled, end_grace_s=STALL_S)
-    print(f"experiment: {args.config or args.layout}, {duration_s:g} s simulated, seed {args.seed}, "
-          f"link {model.name} (seed {link_seed}); node logs in {out}", file=sys.stderr)
+    print(f"experiment: {args.config or args.layout}, {plan.maneuver_label}, {duration_s:g} s simulated, "
+          f"seed {args.seed}, link {model.name} (seed {link_seed}); node logs in {out}", file=sys.stderr)
     try:
         result = run_graph(graph)
         if result.failure is not None:
