@@ -31,6 +31,10 @@ Two evaluation paths give the same numbers (to rounding):
   in which it is block diagonal) and each mode is a first-order recursion evaluated in bulk by
   :func:`first_order_recursion` (blocked scaled prefix sums: numpy only, so that importing the
   estimators does not import scipy.signal, which costs more than a whole calibration's filtering).
+
+Length (over 900 lines): the one filter both estimators run, in its per-sample, bulk and steady-state
+forms, which tests hold equal to rounding; its state layout and segment rules are shared by all three, so they
+stay in one module.
 """
 
 from __future__ import annotations

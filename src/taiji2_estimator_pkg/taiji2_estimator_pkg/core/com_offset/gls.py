@@ -1,9 +1,12 @@
 """The default (``gls``) c.m.-offset estimator: per-sample (node) and bulk (offline) forms.
 
-The two-stage filter (:mod:`.twostage`) accumulates the whitened basis columns of
-:class:`~.com_offset_model.ComOffsetModel`; the estimate for any G follows from that cross-product
-(two-stage ``d(G)``, or jointly with G by :mod:`.joint_com_offset`, the default); the bulk path
-measures the noise in the band that carries d (:mod:`.noise_level`).
+The two-stage filter (:mod:`taiji2_estimator_pkg.core.twostage`) accumulates the whitened basis columns of
+:class:`~.model.ComOffsetModel`; the estimate for any G follows from that cross-product (two-stage ``d(G)``,
+or jointly with G by :mod:`.joint`, the default); the bulk path measures the noise in the band that carries
+d (:mod:`taiji2_estimator_pkg.core.noise_level`).
+
+Length (just over 600 lines): one class whose per-sample and bulk forms share state, gates and checkpoint
+and must agree (tested); kept together for that reason.
 """
 
 from __future__ import annotations

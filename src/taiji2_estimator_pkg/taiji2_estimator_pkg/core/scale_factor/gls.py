@@ -1,5 +1,10 @@
 """The default (``gls``) scale-factor estimator: per-sample (node) and bulk (offline) forms of the
-two-stage filter on the attitude model of :mod:`.scale_factor_model`."""
+two-stage filter on the attitude model of :mod:`.model`.
+
+Length (over 600 lines): one class, :class:`ScaleFactorEstimator`, whose per-sample and bulk forms must give
+the same estimate (tests hold them equal) and share its state, gates and checkpoint; split, the two forms
+would drift apart.
+"""
 
 from __future__ import annotations
 
