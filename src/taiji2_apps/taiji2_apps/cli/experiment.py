@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from taiji2_apps.cli.exit_status import ExitStatus
-from taiji2_apps.runner import Graph, NodeProcess, Progress, run_graph
+from taiji2_apps.runner import Graph, NodeProcess, Progress, run_to_status
 
 _NS = 1_000_000_000
 
@@ -208,20 +208,12 @@ def _run(args: argparse.Namespace, plan: Any, domain: int | None, temporary: boo
              else f"DDS domain {os.environ['ROS_DOMAIN_ID']}")
     print(f"experiment: {args.config or args.layout}, {plan.maneuver_label}, {args.duration_s:g} s simulated, "
           f"seed {args.seed}, method {args.method}; {where}; node logs in {out}", file=sys.stderr)
-    try:
-        result = run_graph(graph)
-        if result.failure is not None:
-            print(f"error: taiji2 experiment: {result.failure}", file=sys.stderr)
-            status = 1
-        else:
-            status = _report(args, plan, monitor, out, temporary, result.wall_s)
-    finally:
+
+    def cleanup() -> None:
         node.destroy_node()
         rclpy.try_shutdown()
-    for problem in result.stop_problems:  # the recording is incomplete
-        print(f"error: taiji2 experiment: {problem}", file=sys.stderr)
-        status = 1
-    return status
+
+    return run_to_status(graph, lambda result: _report(args, plan, monitor, out, temporary, result.wall_s), cleanup)
 
 
 def _report(args: argparse.Namespace, plan: Any, monitor: _Monitor, out: Path, temporary: bool,

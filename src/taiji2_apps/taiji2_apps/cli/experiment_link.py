@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from taiji2_apps.cli.exit_status import ExitStatus
-from taiji2_apps.runner import Graph, NodeProcess, Progress, run_graph
+from taiji2_apps.runner import Graph, NodeProcess, Progress, run_to_status
 
 _NS = 1_000_000_000
 SCALE_FACTOR_NAMES = ("G_Pphi", "G_Ptheta", "G_Ppsi")
@@ -392,21 +392,14 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
                   poll_s=MONITOR_PERIOD_S, stall_s=STALL_S, stall_message=stalled, end_grace_s=STALL_S)
     print(f"experiment: {args.config or args.layout}, {plan.maneuver_label}, {duration_s:g} s simulated, "
           f"seed {args.seed}, link {model.name} (seed {link_seed}); node logs in {out}", file=sys.stderr)
-    try:
-        result = run_graph(graph)
-        if result.failure is not None:
-            print(f"error: taiji2 experiment: {result.failure}", file=sys.stderr)
-            status = 1
-        else:
-            status = _report(args, plan, model, link_seed, monitor, out, duration_s, result.wall_s, temporary)
-    finally:
+
+    def cleanup() -> None:
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
-    for problem in result.stop_problems:  # the recording is incomplete
-        print(f"error: taiji2 experiment: {problem}", file=sys.stderr)
-        status = 1
-    return status
+
+    return run_to_status(graph, lambda result: _report(args, plan, model, link_seed, monitor, out, duration_s,
+                                                       result.wall_s, temporary), cleanup)
 
 
 def _report(args: argparse.Namespace, plan: Any, model: Any, link_seed: int, monitor: LinkMonitor, out: Path,
