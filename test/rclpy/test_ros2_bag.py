@@ -36,8 +36,10 @@ def _stop(proc) -> tuple[int, str]:
 
 def _calibrate(ros, bag) -> dict:
     out = ros(f"python3 -m taiji2_apps.cli.main calibrate {bag} --layout type1 --json", timeout=300)
-    assert out.returncode == 0, out.stderr[-2000:]
-    return json.loads(out.stdout)
+    assert out.returncode in (0, 3), out.stderr[-2000:]  # calibrated; 3: a requirement not met (short run)
+    result = json.loads(out.stdout)
+    assert out.returncode == (0 if result["verdict"]["all_met"] else 3)
+    return result
 
 
 @pytest.mark.parametrize("storage,options", [("mcap", ""), ("mcap", "--storage-preset-profile zstd_fast"),
