@@ -52,8 +52,19 @@ def _simulated_s(tmp_path: Path) -> float:
     return float(lines[-1][2:]) if lines else 0.0
 
 
+@pytest.fixture(autouse=True)
+def _children_before_the_test() -> None:
+    """The pytest worker's own children (e.g. multiprocessing's resource tracker, started by an earlier test in
+    the same worker) are not the run's: only a process that appeared during the test counts as left behind."""
+    global _CHILDREN_BEFORE
+    _CHILDREN_BEFORE = {c.pid for c in psutil.Process().children(recursive=True)}
+
+
+_CHILDREN_BEFORE: set[int] = set()
+
+
 def _no_children_left() -> None:
-    children = psutil.Process().children(recursive=True)
+    children = [c for c in psutil.Process().children(recursive=True) if c.pid not in _CHILDREN_BEFORE]
     assert children == [], [(c.pid, c.cmdline()) for c in children]
 
 
