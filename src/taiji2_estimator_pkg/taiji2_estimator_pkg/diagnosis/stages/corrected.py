@@ -1,5 +1,9 @@
 """Stage 7, corrected: the nominal model extended with the named effects, G and d re-calibrated
-under it (:func:`..extended.corrected_calibration`), and that extended layout (``--write-config``)."""
+under it (:func:`..extended.corrected_calibration`), and that extended layout (``--write-config``).
+
+The named physical effects are re-fitted with G and d (their sigmas marginal over them); named timing
+effects with an onset are held.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES
 from taiji2_estimator_pkg.diagnosis.extended import corrected_calibration, extended_layout, named_extension
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
@@ -40,8 +45,11 @@ def correct_calibration(inp: DiagnosisInput, layout: NominalModel | SimConfig, n
     if not (options.corrected_calibration and (named_fixed or any(timing_change))):
         return Corrected()
     say("corrected calibration: G and d under the model extended with the named effects")
-    corrected = corrected_calibration(inp, start.model, start.settings, timing_change, [*start.fixed, *named_fixed],
-                                      nominal.calibration, start.t_mid, max(2, options.calibration_iterations), say)
+    held = [entry for entry in named_fixed if entry[0].name in TIMING_FAMILIES]
+    free = [entry for entry in named_fixed if entry[0].name not in TIMING_FAMILIES]
+    corrected = corrected_calibration(inp, start.model, start.settings, timing_change, [*start.fixed, *held],
+                                      nominal.calibration, start.t_mid, max(2, options.calibration_iterations), say,
+                                      free)
     corrected["effects"] = specs
     extended = None
     if isinstance(layout, SimConfig):
