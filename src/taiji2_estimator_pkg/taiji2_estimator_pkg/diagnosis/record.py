@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import replace
+from itertools import pairwise
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -470,12 +471,19 @@ class Record:
 def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings, iterations: int,
               progress: Callable[[str], None],
               fixed: Sequence[tuple] = (), t_mid_s: float | None = None,
-              info: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+              info: dict | None = None, free: Sequence[tuple] = ()) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                          np.ndarray]:
     """Gauss-Newton calibration of G and d (with the trends and wrap impulses).
 
     ``fixed``: effects of an extended nominal model (candidate, values, onset), subtracted from the
-    channels at each iteration (:func:`fixed_change`); ``info`` (if given) receives ``"cov"``, the
-    (12, 12) covariance of (relative G, d) of the last iteration, and ``"chi2"``.
+    channels at each iteration (:func:`fixed_change`); ``free``: effects of the same form whose values
+    are only the starting point: they are re-fitted with G and d (their channel change at the current
+    values subtracted, their derivative a column of the fit, relinearised at every iteration), so that
+    G and d are the joint estimate under the extended model and their sigmas are marginal over the
+    effects (a G that an effect aliases with is as uncertain as that effect's magnitude makes it).
+    ``info`` (if given) receives ``"cov"``, the (12, 12) covariance of (relative G, d) of the last
+    iteration, ``"chi2"``, ``"dof"`` and, with ``free``, ``"free_values"`` (the re-fitted values, one
+    array per entry) and ``"free_sigma"``.
 
     Returns
     -------
@@ -498,29 +506,71 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
     sigma_g = np.full((2, 3), np.inf)
     sigma_d = np.full((2, 3), np.inf)
     t_mid = float(0.5 * (inp.t_s[0] + inp.t_s[-1])) if t_mid_s is None else t_mid_s
+    values = [np.atleast_1d(np.asarray(entry[1], dtype=np.float64)).copy() for entry in free]
     for iteration in range(max(1, iterations)):
         lin = linearize(readouts, model, g, d)
-        if fixed:
+        columns: list[np.ndarray] = []
+        if fixed or free:
             ctx = CandidateContext(lin, readouts, model, settings.orbit_period_s, settings.suspension_hz,
                                    settings.damping, t_mid)
-            lin.channels[:] -= sum(fixed_change(ctx, *entry) for entry in fixed)
+            for entry in fixed:
+                lin.channels[:] -= fixed_change(ctx, *entry)
+            for entry, value in zip(free, values, strict=True):
+                change, derivatives = _change_and_derivatives(ctx, entry, value)
+                lin.channels[:] -= change
+                columns += derivatives
         whitener = Whitener(NoiseSpectrum(model, d, n), bins)
-        design = Design.build(whitener, dft(lin.channels, k_max), names,
-                              [column_fft(nuisance_column(lin, model, name), k_max) for name in names])
-        theta, cov, chi2 = design.fit(np.arange(len(names)))
+        design = Design.build(whitener, dft(lin.channels, k_max), [*names, *(f"free{j}" for j in range(len(columns)))],
+                              [column_fft(nuisance_column(lin, model, name), k_max) for name in names]
+                              + [column_fft(column, k_max) for column in columns])
+        theta, cov, chi2 = design.fit(np.arange(len(names) + len(columns)))
+        sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        steps, sigma_free = theta[len(names):], sig[len(names):]
+        bounds = np.cumsum([0, *(value.size for value in values)])
+        for value, (start, stop) in zip(values, pairwise(bounds), strict=True):
+            value += steps[start:stop]
         if info is not None:
             info["cov"] = cov[:12, :12]
             info["chi2"] = chi2
-            info["dof"] = design.n_rows - len(names)
-        sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
+            info["dof"] = design.n_rows - len(names) - len(columns)
+            if free:
+                info["free_values"] = [value.copy() for value in values]
+                info["free_sigma"] = [sigma_free[start:stop] for start, stop in pairwise(bounds)]
         sigma_g, sigma_d = sig[:6].reshape(2, 3), sig[6:12].reshape(2, 3)
         g = g * (1.0 + theta[:6].reshape(2, 3))
         d = d + theta[6:12].reshape(2, 3)
-        change = float(np.max(np.abs(theta[:12]) / np.where(sig[:12] > 0, sig[:12], 1.0)))
+        moved = np.concatenate((theta[:12], steps))
+        scale = np.concatenate((sig[:12], sig[len(names):]))
+        change = float(np.max(np.abs(moved) / np.where(scale > 0, scale, 1.0)))
         progress(f"calibration iteration {iteration + 1}: largest update {change:.3g} sigma")
         if change < 0.05:
             break
     return g, d, sigma_g, sigma_d
+
+
+def _change_and_derivatives(ctx: CandidateContext, entry: tuple, value: np.ndarray
+                            ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The channel change of a free effect at ``value`` and its derivative per parameter: the signature
+    columns of a linear one (no exact or series form: its change is ``sum value_j column_j``), a
+    forward difference (step 1e-4 of the value) of an exact or series one."""
+    candidate, _, onset, *rest = entry
+    t_ref = rest[0] if rest else None
+    if candidate.exact is None and (candidate.series is None or candidate.coefficients is None):
+        derivatives = list(candidate.build(_onset_context(ctx, candidate, onset, t_ref)))
+        return sum(v * column for v, column in zip(value, derivatives, strict=True)), derivatives
+    change = fixed_change(ctx, candidate, value, onset, t_ref)
+    derivatives = []
+    for j in range(value.size):
+        unit = np.zeros(value.size)
+        unit[j] = 1e-4 * abs(float(value[j])) or 1e-9
+        derivatives.append((fixed_change(ctx, candidate, value + unit, onset, t_ref) - change) / unit[j])
+    return change, derivatives
+
+
+def _onset_context(ctx: CandidateContext, candidate: Candidate, onset_s: float | None,
+                   t_ref_s: float | None) -> CandidateContext:
+    ctx = ctx.at_onset(candidate.onset_kind, onset_s)
+    return ctx if t_ref_s is None else replace(ctx, t_mid_s=float(t_ref_s))
 
 
 def fixed_change(ctx: CandidateContext, candidate: Candidate, theta: np.ndarray, onset_s: float | None,
@@ -528,9 +578,7 @@ def fixed_change(ctx: CandidateContext, candidate: Candidate, theta: np.ndarray,
     """(n, 15) channel change of a candidate at the values ``theta`` (exact where the signature has an
     exact or series form, first order otherwise), starting at ``onset_s``; a drift is zero at ``t_ref_s``
     (default: the middle of the run)."""
-    ctx = ctx.at_onset(candidate.onset_kind, onset_s)
-    if t_ref_s is not None:
-        ctx = replace(ctx, t_mid_s=float(t_ref_s))
+    ctx = _onset_context(ctx, candidate, onset_s, t_ref_s)
     theta = np.atleast_1d(np.asarray(theta, dtype=np.float64))
     if candidate.exact is not None:
         return candidate.exact(ctx, float(theta[0]))

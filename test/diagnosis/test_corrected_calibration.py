@@ -1,0 +1,107 @@
+"""The corrected calibration (stage 7, diagnosis/stages/corrected.py, extended.corrected_calibration) under
+the readout effects of a GRS (effect_catalog/readout.py): cross-talk, scale-factor drift, nonlinearity.
+
+Issue 39: a named cross-talk made the calibration worse (G 12 -> 78 sigma). The named effects were held at
+their fitted values and G re-fitted with G's conditional sigma; an electrode imbalance moves G by eta d / r
+(six times eta on Type-1), so a value off by its own sigma moved G by many of G's sigmas, and an unnamed part of
+the cross-talk, absorbed by the named terms, moved it further. Now the named effects are re-fitted with G and d
+(sigmas marginal over them), and the whole cross-talk of a GRS where a gap stays unexplained beside it.
+
+Seeded statistical checks, tolerances in sigmas of each calibration: the corrected G and d within 3 sigma of the
+truth, and no further from it than the nominal calibration + 1 sigma (worst component of each). Type-1, unclipped
+readout (conftest), standard simulator.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from taiji2_estimator_pkg.diagnosis import DiagnosisOptions, diagnose, prepare_input
+from taiji2_estimator_pkg.diagnosis.extended import corrected_calibration, fixed_from_specs
+from taiji2_estimator_pkg.diagnosis.model import NominalModel
+from taiji2_estimator_pkg.diagnosis.options import record_settings
+from taiji2_estimator_pkg.diagnosis.record import calibrate
+from taiji2_model.config import load_config
+from taiji2_model.effect_catalog import make_effect
+from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
+
+HOUR = 36000
+
+
+def _data(effects, n, seed):
+    config = load_config("type1")
+    commands = maneuver_torque_commands(config, n)
+    out = simulate_batch(config, seed, commands, effects=[make_effect(**e) for e in effects])
+    return config, prepare_input(out.t_s, out.st_quat_xyzw, out.voltages_v, commands, config.sample_rate_hz)
+
+
+def _worst_z(config, calibration):
+    """Worst |error| / sigma of G and of d against the layout's truth."""
+    g_true = np.array([s.angular_scale_factors for s in config.grs.sensors])
+    d_true = np.array([s.com_offset_m for s in config.grs.sensors])
+    z_g = (np.asarray(calibration["g_angular"]) / g_true - 1.0) / np.asarray(calibration["g_angular_sigma_relative"])
+    z_d = (np.asarray(calibration["com_offset_m"]) - d_true) / np.asarray(calibration["com_offset_sigma_m"])
+    return float(np.max(np.abs(z_g))), float(np.max(np.abs(z_d)))
+
+
+def _assert_corrected(config, nominal, corrected, g_min=5.0):
+    nominal_g, nominal_d = _worst_z(config, nominal)
+    corrected_g, corrected_d = _worst_z(config, corrected)
+    assert nominal_g > g_min, (nominal_g, nominal_d)  # the effect biases the nominal G
+    assert corrected_g < 3.0 and corrected_d < 3.0, (nominal_g, nominal_d, corrected_g, corrected_d)
+    assert corrected_g <= nominal_g + 1.0 and corrected_d <= nominal_d + 1.0, (nominal_g, nominal_d, corrected_g,
+                                                                               corrected_d)
+
+
+def test_named_part_of_a_cross_talk_corrects_the_calibration():
+    """GRS1 cross-talk (misalignment about three axes, imbalance of three pairs, 1 h, seed 23): the selection
+    names the three imbalances, a gap stays unexplained. Before issue 39 the corrected G was 15.9 sigma off (the
+    imbalances absorbed the misalignment), the nominal one 10.3; re-fitted with the whole cross-talk of GRS1
+    it is 2.3 sigma off (d: 2.8 nominal, 1.4 corrected)."""
+    effect = {"name": "cross_coupling", "grs": 1, "misalignment_rad": [4e-4, -5e-4, 6e-4],
+              "imbalance": [2e-4, -2e-4, 3e-4]}
+    config, inp = _data([effect], HOUR, seed=23)
+    result = diagnose(inp, config)
+    assert "cross_coupling" in result.verdict["effects"], result.verdict["summary"]
+    _assert_corrected(config, result.calibration, result.corrected)
+    assert result.verdict["unexplained"], result.verdict["summary"]  # so the whole cross-talk of GRS1 is re-fitted
+    refitted = {entry["variant"] for entry in result.corrected["refitted"]}
+    assert {f"cross_coupling[grs1.{part}_{axis}]" for part in ("misalign", "imbalance") for axis in "xyz"} <= refitted
+
+
+# The corrected calibration alone, from a named value off by half the truth (a fitted magnitude as wrong as a
+# partial model makes it): 30 min, seed 7, a few seconds each. (effect, named fraction, least nominal bias of G
+# [sigma]); measured nominal -> corrected worst G: imbalance 27.5 -> 1.4, misalignment 6.9 -> 1.9, drift 5.8 -> 1.9,
+# nonlinearity 4.6 -> 1.9; held at the named value as before issue 39: 12.8, 3.6, 3.0, 11.0 (its series form holds
+# to k a_max ~ 0.2: k = 4e7 on phi already leaves 2.7 sigma re-fitted).
+_READOUT = [
+    ({"name": "cross_coupling", "grs": 1, "imbalance": [1e-3, 0, 0]}, 0.5, 5.0),
+    ({"name": "cross_coupling", "grs": 2, "misalignment_rad": [5e-3, 0, 0]}, 0.5, 5.0),
+    ({"name": "scale_factor_drift", "rate_per_s": 3e-6, "grs": 1, "axis": "z", "t_ref_s": 0.0}, 0.5, 5.0),
+    ({"name": "readout_nonlinearity", "k": 3e7, "grs": 1, "readout": "theta"}, 0.5, 4.0),
+]
+
+
+@pytest.mark.parametrize(("effect", "named_fraction", "g_min"), _READOUT,
+                         ids=["imbalance", "misalignment", "scale_factor_drift", "readout_nonlinearity"])
+def test_corrected_calibration_refits_a_readout_effect(effect, named_fraction, g_min):
+    """The named value re-fitted with G and d: G and d back at the truth, the effect within 3 sigma of its truth."""
+    config, inp = _data([effect], HOUR // 2, seed=7)
+    model = NominalModel.from_config(config)
+    settings = record_settings(DiagnosisOptions())
+    t_mid = float(0.5 * (inp.t_s[0] + inp.t_s[-1]))
+    quiet = lambda message: None  # noqa: E731
+    g, d, sigma_g, sigma_d = calibrate(inp, model, settings, 4, quiet)
+    nominal = {"g_angular": g, "g_angular_sigma_relative": sigma_g, "com_offset_m": d, "com_offset_sigma_m": sigma_d}
+    named = dict(effect)
+    for key in ("imbalance", "misalignment_rad", "rate_per_s", "k"):
+        if key in named:
+            named[key] = (named_fraction * np.asarray(named[key])).tolist()
+    _, free = fixed_from_specs([named], model, settings)
+    corrected = corrected_calibration(inp, model, settings, (0.0, 0.0, 0.0), [], nominal, t_mid, 4, quiet, free)
+    _assert_corrected(config, nominal, corrected, g_min)
+    _, truth = fixed_from_specs([effect], model, settings)
+    for entry, (candidate, value, _, _) in zip(corrected["refitted"], truth, strict=True):
+        assert entry["variant"] == candidate.key
+        assert abs(entry["values"][0] - value[0]) < 3.0 * entry["sigmas"][0], (entry, value)
