@@ -8,7 +8,7 @@ import subprocess
 import pytest
 
 from taiji2_apps.experiment_setup import plan_experiment
-from taiji2_apps.maneuver_choice import choose_maneuver
+from taiji2_model.maneuver_choice import choose_maneuver
 from taiji2_model.maneuver_families import builtin_maneuver_file, maneuver_spec
 
 from support import PYTHON, python_subprocess_env

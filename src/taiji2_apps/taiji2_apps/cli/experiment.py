@@ -128,7 +128,7 @@ def main(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"error: taiji2 experiment: {' '.join(str(exc).split())}", file=sys.stderr)
         return ExitStatus.BAD_INPUT
-    args.duration_s, args.maneuver = plan.duration_s, plan.maneuver_file or ""
+    args.duration_s, args.maneuver = plan.duration_s, plan.maneuver_file or "paper"
     try:
         reservation = _private_domain()
     except RuntimeError as exc:
