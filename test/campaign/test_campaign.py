@@ -197,5 +197,5 @@ def test_a_case_flies_what_every_verb_flies_by_default():
             chosen.duration_s)
     paper = expand_cases(load_spec({"layouts": ["type1"], "maneuvers": ["paper"], "durations_s": [600]}))[0]
     assert case_config(paper).maneuver.period_s == 250.0 and paper["duration_s"] == 600.0
-    with pytest.raises(SpecError, match="maneuvers: .*no_such.yaml"):
+    with pytest.raises(SpecError, match=r"maneuvers: .*no_such\.yaml"):
         load_spec({"layouts": ["type1"], "maneuvers": ["no_such.yaml"]})

@@ -64,10 +64,15 @@ class ExperimentPlan:
 
         return {"kind": self.maneuver_kind, "file": self.maneuver_file, **maneuver_spec(self.maneuver)}
 
+    def maneuver_parameter(self) -> str:
+        """The nodes' ``maneuver`` parameter for this maneuver: ``design``, ``paper`` or the file (the nodes
+        resolve and name it as the verbs do)."""
+        return self.maneuver_kind if self.maneuver_kind in ("design", "paper") else str(self.maneuver_file)
+
     def commander_parameters(self) -> list[str]:
         """``-p`` arguments of maneuver_commander for this maneuver."""
-        if self.maneuver_file:
-            return ["-p", f"maneuver:={self.maneuver_file}"]
+        if self.maneuver_kind != "paper":
+            return ["-p", f"maneuver:={self.maneuver_parameter()}"]
         return ["-p", "maneuver:=paper", "-p", f"duration_s:={self.duration_s}"]
 
 

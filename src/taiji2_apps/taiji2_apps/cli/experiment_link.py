@@ -334,6 +334,7 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
     nodes.append(NodeProcess.taiji2("spacecraft_sim", [
         "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard", *onboard_remaps, *source,
         "-p", f"seed:={args.seed}", "-p", f"duration_s:={duration_s}", "-p", "wait_for_subscribers:=[1, 1, 1]",
+        "-p", f"maneuver:={args.maneuver}",
         "-p", "publish_truth_kinematics:=false", "-p", "config_overrides:=" + json.dumps(overrides)], ends=True))
     if args.record:
         nodes.append(NodeProcess.taiji2("recorder", ["bag", "record", "-a", "-x", "^/(onboard|taiji2/sim)/", "-o",

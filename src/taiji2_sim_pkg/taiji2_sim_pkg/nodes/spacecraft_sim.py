@@ -142,8 +142,10 @@ class SpacecraftSim(rclpy.node.Node):
         # overrides of the maneuver section describe the preset's square wave, modified
         if not asked and any(o.strip().startswith("maneuver.") for o in overrides if o):
             asked = "paper"
-        end_s = (choose_maneuver(layout, asked or None, None, config_file=config_file, preset=config).duration_s
-                 if duration_s < 0 else duration_s)
+        # what the commander flies (the commands come on the topic): its end is the default duration, its
+        # name goes into the provenance (bags and calibrate name it)
+        self._maneuver = choose_maneuver(layout, asked or None, None, config_file=config_file, preset=config)
+        end_s = self._maneuver.duration_s if duration_s < 0 else duration_s
         self._n_steps = round(end_s / config.dt_s)
         self._gate = CommandGate(config.thrusters.max_thrust_n * config.thrusters.lever_arm_m)
         self._schedule = CommandSchedule()
@@ -171,7 +173,8 @@ class SpacecraftSim(rclpy.node.Node):
         self._truth = _TruthPublishers(self, reliable_all, truth_kinematics) if self._publish_truth else None
         latched = rclpy.qos.QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
         self._provenance_pub = self.create_publisher(m.std_msgs.String, PROVENANCE_TOPIC, latched)
-        self._provenance_pub.publish(m.std_msgs.String(data=json.dumps(self._sim.provenance())))
+        self._provenance_pub.publish(m.std_msgs.String(data=json.dumps(
+            {**self._sim.provenance(), "maneuver": self._maneuver.provenance()})))
         self.create_subscription(m.geometry_msgs.WrenchStamped, COMMAND_TOPIC, self._on_command, reliable_all)
 
         if self._mode == "realtime":
