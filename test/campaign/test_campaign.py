@@ -181,3 +181,21 @@ def test_reference_fidelity_and_model_overrides_reach_the_case():
     assert all(r["fidelity"] == "reference" for r in result["rows"])
     # 4x the force PSD in the data: the c.m.-offset stage measures it in the band of d
     assert all(r["noise_adjusted"] and r["nis_band"] > 1.5 for r in d_rows)
+
+
+def test_a_case_flies_what_every_verb_flies_by_default():
+    from taiji2_apps.campaign.case import case_config
+    from taiji2_model.maneuver_choice import choose_maneuver
+
+    for layout in ("type1", "type2"):
+        case = expand_cases(load_spec({"layouts": [layout]}))[0]
+        chosen = choose_maneuver(layout, None, None)
+        assert (case["maneuver"], case["duration_s"]) == ("design", chosen.duration_s)
+        flown = case_config(case).maneuver
+        assert (flown.period_s, list(flown.amplitude_n_m), list(flown.phase_s), flown.duration_s) == (
+            chosen.maneuver.period_s, list(chosen.maneuver.amplitude_n_m), list(chosen.maneuver.phase_s),
+            chosen.duration_s)
+    paper = expand_cases(load_spec({"layouts": ["type1"], "maneuvers": ["paper"], "durations_s": [600]}))[0]
+    assert case_config(paper).maneuver.period_s == 250.0 and paper["duration_s"] == 600.0
+    with pytest.raises(SpecError, match=r"maneuvers: .*no_such\.yaml"):
+        load_spec({"layouts": ["type1"], "maneuvers": ["no_such.yaml"]})

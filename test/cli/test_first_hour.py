@@ -114,11 +114,12 @@ def test_experiment_default_maneuver_is_the_shipped_design_and_paper_is_the_pres
     plan = plan_experiment("type1", "", None, None, [], 1, "gls")
     assert plan.maneuver_kind == "design" and plan.maneuver_file.endswith("maneuvers/type1.yaml")
     assert plan.duration_s == 12909.0 and plan.maneuver_covers_run  # 3.59 h: inside the GRS range with the noise
-    assert plan.commander_parameters() == ["-p", f"maneuver_file:={plan.maneuver_file}"]
+    assert plan.commander_parameters() == ["-p", "maneuver:=design"]
     paper = plan_experiment("type1", "", "paper", 20000.0, [], 1, "gls")
     assert paper.maneuver_kind == "paper" and paper.maneuver_file is None
     # the preset flies the whole run (it stopped at 3 h before)
-    assert paper.commander_parameters() == ["-p", "duration_s:=20000.0"] and paper.maneuver_covers_run
+    assert paper.commander_parameters() == ["-p", "maneuver:=paper", "-p", "duration_s:=20000.0"]
+    assert paper.maneuver_covers_run
     # type2 ships a design too (10.45 h); a config file of one's own gets the paper's preset
     type2 = plan_experiment("type2", "", None, None, [], 1, "gls")
     assert type2.maneuver_kind == "design" and type2.maneuver_file.endswith("maneuvers/type2.yaml")

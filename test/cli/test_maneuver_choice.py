@@ -8,7 +8,7 @@ import subprocess
 import pytest
 
 from taiji2_apps.experiment_setup import plan_experiment
-from taiji2_apps.maneuver_choice import choose_maneuver
+from taiji2_model.maneuver_choice import choose_maneuver
 from taiji2_model.maneuver_families import builtin_maneuver_file, maneuver_spec
 
 from support import PYTHON, python_subprocess_env
@@ -41,11 +41,17 @@ def test_simulate_flies_and_records_the_default_maneuver(tmp_path):
     import yaml
 
     out = tmp_path / "bag"
-    proc = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "simulate", "--duration-s", "30", "--out", str(out)],
+    proc = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "simulate", "--duration-s", "600", "--out", str(out)],
                           env=python_subprocess_env(), capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
-    chosen = choose_maneuver("type1", None, 30.0)
+    chosen = choose_maneuver("type1", None, 600.0)
     assert json.loads(proc.stdout)["maneuver"] == chosen.label
     meta = yaml.safe_load((out / "metadata.yaml").read_text())["rosbag2_bagfile_information"]  # any ROS 2 tool's view
     provenance = json.loads(meta["custom_data"]["taiji2.provenance"])
     assert provenance["maneuver"]["label"] == chosen.label and provenance["maneuver"]["kind"] == chosen.kind
+    # calibrate of that bag names the same maneuver, in its table and its verdict
+    calibrated = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "calibrate", str(out), "--json"],
+                                env=python_subprocess_env(), capture_output=True, text=True, timeout=300)
+    assert calibrated.returncode in (0, 3), calibrated.stderr  # 600 s: some requirements not met (3)
+    result = json.loads(calibrated.stdout)
+    assert result["maneuver"] == chosen.label and chosen.label in json.dumps(result["verdict"])

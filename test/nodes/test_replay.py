@@ -31,6 +31,14 @@ def test_bag_replayed_into_the_estimators_reproduces_the_live_estimates(tmp_path
     # verdict says which): both are a complete run, which is all this test needs
     assert live.returncode in (0, 3), stderr
     live_result = json.loads(stdout.strip().splitlines()[-1])
+    # the same run read by calibrate (its recording): the same maneuver named, and every requirement the
+    # experiment met (1-sigma, bound and error within) met on the 1-sigma alone, by the same judge
+    calibrated = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "calibrate", str(bag), "--json"],
+                                env=python_subprocess_env(), capture_output=True, text=True, timeout=300)
+    assert calibrated.returncode in (0, 3), calibrated.stderr
+    verdict = json.loads(calibrated.stdout)["verdict"]
+    assert verdict["maneuver"] == live_result["verdict"]["maneuver"] == "the shipped type1 design (taiji2 design)"
+    assert set(live_result["verdict"]["met"]) <= set(verdict["met"]), (live_result["verdict"], verdict)
 
     ctx = rclpy.context.Context()
     rclpy.init(args=["replay-test"], context=ctx)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from taiji2_apps.maneuver_choice import MANEUVER_CHOICES, choose_maneuver
+from taiji2_model.maneuver_choice import MANEUVER_CHOICES, choose_maneuver
 
 __all__ = ["MANEUVER_CHOICES", "ExperimentPlan", "experiment_verdict", "plan_experiment"]
 
@@ -64,11 +64,16 @@ class ExperimentPlan:
 
         return {"kind": self.maneuver_kind, "file": self.maneuver_file, **maneuver_spec(self.maneuver)}
 
+    def maneuver_parameter(self) -> str:
+        """The nodes' ``maneuver`` parameter for this maneuver: ``design``, ``paper`` or the file (the nodes
+        resolve and name it as the verbs do)."""
+        return self.maneuver_kind if self.maneuver_kind in ("design", "paper") else str(self.maneuver_file)
+
     def commander_parameters(self) -> list[str]:
         """``-p`` arguments of maneuver_commander for this maneuver."""
-        if self.maneuver_file:
-            return ["-p", f"maneuver_file:={self.maneuver_file}"]
-        return ["-p", f"duration_s:={self.duration_s}"]
+        if self.maneuver_kind != "paper":
+            return ["-p", f"maneuver:={self.maneuver_parameter()}"]
+        return ["-p", "maneuver:=paper", "-p", f"duration_s:={self.duration_s}"]
 
 
 def plan_experiment(layout: str, config_file: str, maneuver: str | None, duration_s: float | None,

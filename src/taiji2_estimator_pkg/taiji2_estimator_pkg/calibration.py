@@ -190,9 +190,9 @@ def calibrate(record: AlignedRecord, instrument: InstrumentModel, method: str = 
                                 star_tracker_offset_s=record.star_tracker_offset_s)
     g, d = result.scale_factors, result.com_offsets
     rejected = _merge(record.rejected, _estimator_rejections(record, g.rejected, d.rejected))
-    total_rejected = sum(sum(v.values()) for v in rejected.values())
     results = []
     for gid in GRS_IDS:
+        total_rejected = _rejected_for(rejected, gid)
         g_i, g_cov = g.of(gid)
         d_i, d_cov = d.of(gid)
         results.append(GrsResult(grs_id=gid, scale_factors=np.asarray(g_i), scale_factors_cov=np.asarray(g_cov),
@@ -209,6 +209,14 @@ def calibrate(record: AlignedRecord, instrument: InstrumentModel, method: str = 
                                 "star_tracker_offset_s": record.star_tracker_offset_s,
                                 "stream_phase_s": dict(record.phase_s),
                                 **_com_offset_extra(d)})
+
+
+def _rejected_for(rejected: Mapping[str, Mapping[str, int]], grs_id: int) -> int:
+    """The rejected samples of the streams GRS ``grs_id``'s estimates use: the star tracker and its own
+    voltages (the command stream and the other GRS's voltages are counted under their own names)."""
+    others = tuple(f"grs{g}" for g in GRS_IDS if g != grs_id)
+    return sum(sum(reasons.values()) for stream, reasons in rejected.items()
+               if "command" not in stream and not any(o in stream for o in others))
 
 
 def _com_offset_extra(d: ComOffsetEstimate) -> dict[str, Any]:

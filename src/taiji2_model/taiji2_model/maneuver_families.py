@@ -16,7 +16,7 @@ A maneuver file is YAML (or JSON)::
                 phase_rad: [[...3...], [...3...]]}
 
 with ``square: {period_s, amplitude_n_m, phase_s}`` or ``piecewise: {step_s, torque_n_m: [[x, y, z], ...]}``
-for the other families. The maneuver_commander reads it (parameter ``maneuver_file``) and the
+for the other families. The maneuver_commander reads it (parameter ``maneuver``) and the
 simulator core samples it with :func:`~.simulator.maneuver_torque_commands` (``maneuver=``).
 """
 

@@ -25,14 +25,57 @@ PARAMETERS = ([f"grs{g}.{p}" for g in (1, 2) for p in G_NAMES] + [f"grs{g}.d_{a}
               + [f"diff.d_{a}" for a in AXES])
 
 
+def default_maneuver(layout: str) -> str | None:
+    """A case's maneuver when the spec names none: what every verb flies by default (``design`` where the
+    built-in layout ships one; a layout file or a layout without a design: its own square wave, None)."""
+    from taiji2_model.maneuver_choice import choose_maneuver
+
+    try:
+        return "design" if choose_maneuver(str(layout), None, 1.0).kind == "design" else None
+    except ValueError:  # a layout file: its own maneuver section
+        return None
+
+
+def maneuver_end_s(layout: str, maneuver: str | None) -> float:
+    """The end [s] of a case's maneuver (its default duration)."""
+    from taiji2_model.config import builtin_layouts, load_config
+    from taiji2_model.maneuver_choice import choose_maneuver
+
+    if maneuver is None or maneuver in builtin_layouts():
+        m = load_config(str(layout if maneuver is None else maneuver)).maneuver
+        return float(m.start_s + m.duration_s)
+    return choose_maneuver(str(layout), maneuver, None).duration_s
+
+
 def case_config(case: Mapping[str, Any]) -> Any:
-    """The validated SimConfig of a case (layout, maneuver preset, duration, overrides)."""
-    from taiji2_model.config import load_config
+    """The validated SimConfig of a case (layout, maneuver, duration, overrides).
+
+    ``maneuver``: None, the layout's own square wave; a built-in layout name, that layout's square wave;
+    otherwise a ``--maneuver`` choice (``design``, ``paper`` or a maneuver file) of the square family, whose
+    period, amplitudes, phases and start replace the layout's (the batch simulator and the bound fly the
+    configuration's square wave). ConfigError (key ``maneuver``) for a maneuver a case cannot fly.
+    """
+    from taiji2_model.config import ConfigError, builtin_layouts, load_config
+    from taiji2_model.maneuver import SquareWaveManeuver
+    from taiji2_model.maneuver_choice import choose_maneuver
 
     overrides: dict[str, Any] = {}
-    if case.get("maneuver"):
-        preset = load_config(str(case["maneuver"])).to_dict()["maneuver"]
+    maneuver = case.get("maneuver")
+    if maneuver in builtin_layouts():
+        preset = load_config(str(maneuver)).to_dict()["maneuver"]
         overrides.update({f"maneuver.{k}": v for k, v in preset.items() if k not in ("start_s", "duration_s")})
+    elif maneuver and maneuver != "paper":
+        try:
+            flown = choose_maneuver(str(case["layout"]), str(maneuver), float(case["duration_s"])).maneuver
+        except ValueError as exc:
+            raise ConfigError("maneuver", str(exc)) from None
+        if not isinstance(flown, SquareWaveManeuver):
+            raise ConfigError("maneuver", f"{maneuver}: a campaign flies square waves (the batch simulator's and "
+                              f"the bound's maneuver), got family {type(flown).__name__}")
+        overrides.update({"maneuver.period_s": float(flown.period_s),
+                          "maneuver.amplitude_n_m": [float(v) for v in flown.amplitude_n_m],
+                          "maneuver.phase_s": [float(v) for v in flown.phase_s],
+                          "maneuver.start_s": float(flown.start_s)})
     overrides["maneuver.duration_s"] = float(case["duration_s"])
     overrides.update(case.get("overrides", {}))
     return load_config(str(case["layout"]), overrides=overrides)

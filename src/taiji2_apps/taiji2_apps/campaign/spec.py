@@ -20,8 +20,10 @@ import yaml
 SPEC_KEYS = {
     "name": "campaign name (str)",
     "layouts": "built-in layout names or YAML config paths (list)",
-    "maneuvers": "maneuver presets: a layout whose maneuver section replaces the case's (list, optional)",
-    "durations_s": "experiment durations [s] (list)",
+    "maneuvers": "what is flown (list, default [null]): null, what every verb flies by default (the layout's "
+                 "shipped design where it has one, else its square wave); design; paper; a maneuver file of "
+                 "the square family; or a built-in layout whose square wave replaces the case's",
+    "durations_s": "experiment durations [s] (list, default [null]: the maneuver's end)",
     "seeds": "list of ints, or {start: int, count: int}",
     "methods": "estimator methods, subset of [gls, paper]",
     "overrides": "dotted-key config overrides applied to every case (mapping)",
@@ -76,7 +78,8 @@ def load_spec(source: str | os.PathLike[str] | Mapping[str, Any]) -> dict[str, A
         "name": str(raw.get("name", "campaign")),
         "layouts": _list(raw, "layouts", ["type1"]),
         "maneuvers": _list(raw, "maneuvers", [None]),
-        "durations_s": [_positive("durations_s", v) for v in _list(raw, "durations_s", [10800.0])],
+        "durations_s": [None if v is None else _positive("durations_s", v)
+                        for v in _list(raw, "durations_s", [None])],
         "seeds": _seeds(raw.get("seeds", {"start": 1, "count": 1})),
         "methods": _methods(raw.get("methods", ["gls"])),
         "overrides": _mapping(raw, "overrides"),
@@ -91,12 +94,18 @@ def load_spec(source: str | os.PathLike[str] | Mapping[str, Any]) -> dict[str, A
     }
     if "cases" in raw and "layouts" not in raw and "grid" not in raw:
         spec["layouts"] = []  # explicit cases only
-    _check_configs(expand_cases(spec))
+    try:
+        cases = expand_cases(spec)
+    except ValueError as exc:  # a maneuver that cannot be resolved (its end is the default duration)
+        raise SpecError("maneuvers", " ".join(str(exc).split())) from None
+    _check_configs(cases)
     return spec
 
 
 def expand_cases(spec: Mapping[str, Any]) -> list[dict[str, Any]]:
     """All cases of a normalised spec, in a stable order, each with its ``case_hash``."""
+    from taiji2_apps.campaign.case import default_maneuver, maneuver_end_s
+
     cases: list[dict[str, Any]] = []
     grid_keys = list(spec["grid"])
     grid_values = [spec["grid"][k] for k in grid_keys]
@@ -104,12 +113,18 @@ def expand_cases(spec: Mapping[str, Any]) -> list[dict[str, Any]]:
             spec["layouts"], spec["maneuvers"], spec["durations_s"], itertools.product(*grid_values),
             spec["effect_sets"], spec.get("fidelities", ["standard"]), spec["seeds"]):
         overrides = {**spec["overrides"], **dict(zip(grid_keys, combo, strict=True))}
-        cases.append({"layout": layout, "maneuver": maneuver, "duration_s": float(duration_s), "seed": int(seed),
+        flown = default_maneuver(layout) if maneuver is None else maneuver
+        duration_s = maneuver_end_s(layout, flown) if duration_s is None else duration_s
+        cases.append({"layout": layout, "maneuver": flown, "duration_s": float(duration_s), "seed": int(seed),
                       "overrides": overrides, "effects": list(effects), "fidelity": fidelity,
                       "model_overrides": dict(spec.get("model_overrides", {}))})
     for case in spec["cases"]:
-        cases.append({"layout": case.get("layout", "type1"), "maneuver": case.get("maneuver"),
-                      "duration_s": float(case.get("duration_s", 10800.0)), "seed": int(case.get("seed", 1)),
+        layout = case.get("layout", "type1")
+        flown = default_maneuver(layout) if case.get("maneuver") is None else case["maneuver"]
+        duration_s = case.get("duration_s")
+        cases.append({"layout": layout, "maneuver": flown,
+                      "duration_s": float(maneuver_end_s(layout, flown) if duration_s is None else duration_s),
+                      "seed": int(case.get("seed", 1)),
                       "overrides": {**spec["overrides"], **dict(case.get("overrides", {}))},
                       "effects": list(case.get("effects", [])),
                       "fidelity": _fidelities([case.get("fidelity", "standard")])[0],

@@ -62,6 +62,7 @@ def _main(args: argparse.Namespace) -> int:
     from taiji2_estimator_pkg.report import format_table
     from taiji2_ground_pkg.raw_data import load_raw_data
     from taiji2_ground_pkg.raw_packets import time_correlation_from
+    from taiji2_runtime.bag.provenance import flown_maneuver
 
     raw = load_raw_data(args.bag, correlation=time_correlation_from(args.time_correlation))
     instrument = InstrumentModel.from_layout(args.config or args.layout)
@@ -94,7 +95,9 @@ def _main(args: argparse.Namespace) -> int:
                         "duration_s": duration_s, "wall_time_s": elapsed})
     if corrections is not None:
         table.extra["known_effects"] = corrections
-    verdict = _verdict(table, duration_s)
+    flown = flown_maneuver(raw.custom_data)
+    table.extra["maneuver"] = flown
+    verdict = _verdict(table, duration_s, flown)
     status = ExitStatus.OK if verdict.all_met else ExitStatus.NOT_MET
     if args.json:
         print(json.dumps({**table.to_dict(), "verdict": verdict.to_dict()}))
@@ -123,7 +126,7 @@ def _main(args: argparse.Namespace) -> int:
     return status
 
 
-def _verdict(table: object, duration_s: float) -> object:
+def _verdict(table: object, duration_s: float, flown: str | None) -> object:
     """The verdict of a recording, by the experiment's rules (:func:`taiji2_estimator_pkg.verdict.judge`) on
     the 1-sigma alone: no truth and no bound of the flown maneuver here, so a requirement whose 1-sigma is
     beyond it is named with the run length that would meet it (1-sigma falls as 1/sqrt(T))."""
@@ -131,4 +134,4 @@ def _verdict(table: object, duration_s: float) -> object:
 
     remedy = ("a longer run of this maneuver, or a designed one: taiji2 design --minimize-duration "
               "(docs/maneuver_design.md)")
-    return judge(table, None, duration_s, "the maneuver in the data", remedy=remedy)
+    return judge(table, None, duration_s, flown or "the maneuver in the data", remedy=remedy)

@@ -1,6 +1,6 @@
 """Design the calibration maneuver: minimise the largest CRLB / requirement inside range, thrust, attitude.
 
-Writes into --out: ``maneuver.yaml`` (maneuver_commander ``maneuver_file``; ``taiji2 experiment
+Writes into --out: ``maneuver.yaml`` (maneuver_commander ``maneuver``; ``taiji2 experiment
 --maneuver``), ``report.json`` (objects ``design`` and ``paper``, each with
 ``crlb_over_requirement`` per parameter), ``report.md`` and PNGs. Progress on stderr.
 
@@ -207,7 +207,7 @@ def main(args: argparse.Namespace) -> int:
     maneuver_path = out / "maneuver.yaml"
     save_maneuver_file(maneuver_path, final_maneuver,
                        f"taiji2 design: layout {layout}, family {args.family}, {final_s:.0f} s, seed {args.seed}\n"
-                       f"max CRLB/requirement {np.max(final_ratios):.3f}; maneuver_commander maneuver_file")
+                       f"max CRLB/requirement {np.max(final_ratios):.3f}; maneuver_commander maneuver")
     report: dict[str, Any] = {
         "layout": layout, "family": args.family, "seed": args.seed, "reference_duration_s": reference_s,
         "minimize_duration": bool(args.minimize_duration), "shortest_duration_s": (

@@ -128,7 +128,7 @@ def main(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"error: taiji2 experiment: {' '.join(str(exc).split())}", file=sys.stderr)
         return ExitStatus.BAD_INPUT
-    args.duration_s, args.maneuver = plan.duration_s, plan.maneuver_file or ""
+    args.duration_s, args.maneuver = plan.duration_s, plan.maneuver_parameter()
     try:
         reservation = _private_domain()
     except RuntimeError as exc:
@@ -179,6 +179,7 @@ def _run(args: argparse.Namespace, plan: Any, domain: int | None, temporary: boo
         # the simulator exits (0) when done; every other node runs until stopped
         NodeProcess.taiji2("spacecraft_sim", ["run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", *source, "-p",
                                               f"seed:={args.seed}", "-p", f"duration_s:={args.duration_s}",
+                                              "-p", f"maneuver:={args.maneuver}",  # named in its provenance
                                               "-p", f"wait_for_subscribers:={subscribers}",
                                               "-p", "config_overrides:=" + json.dumps(overrides)], ends=True),
     ]

@@ -184,18 +184,6 @@ def requirement_times(history: dict[str, list[tuple[int, list[float], list[float
     return out
 
 
-def _maneuver_file(choice: str, layout: str) -> str:
-    """The maneuver file the planner flies: ``paper`` or empty: none (the layout's square wave); ``design``:
-    the layout's shipped design (config/maneuvers/LAYOUT.yaml) where there is one; else the path given."""
-    if choice in ("", "paper"):
-        return ""
-    if choice == "design":
-        from taiji2_model.maneuver_families import builtin_maneuver_file
-
-        return builtin_maneuver_file(layout) or ""
-    return str(Path(choice).resolve())
-
-
 def earliest_maneuver_start_s(model: Any) -> float:
     """The first time a command table uplinked in the first pass can be executed, rounded up to 10 s."""
     import math
@@ -305,8 +293,8 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         onboard_remaps += ["-r", f"{topic}:=/onboard{topic}"]
     est_args = ["--ros-args", "-r", "__ns:=/ground", "-p", f"layout:={args.config or args.layout}",
                 "-p", f"method:={args.method}"]
-    maneuver_file = _maneuver_file(getattr(args, "maneuver", None) or "", args.layout)
-    commander_maneuver = [f"maneuver_file:={maneuver_file}"] if maneuver_file else []
+    # the plan's resolved choice (experiment.py): a maneuver file, or paper
+    commander_maneuver = [f"maneuver:={args.maneuver}"]
     start_s = earliest_maneuver_start_s(model)
     if start_s > 0:
         print(f"experiment: the maneuver starts at {start_s:g} s, when the first command table can be onboard "
@@ -346,6 +334,7 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
     nodes.append(NodeProcess.taiji2("spacecraft_sim", [
         "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard", *onboard_remaps, *source,
         "-p", f"seed:={args.seed}", "-p", f"duration_s:={duration_s}", "-p", "wait_for_subscribers:=[1, 1, 1]",
+        "-p", f"maneuver:={args.maneuver}",
         "-p", "publish_truth_kinematics:=false", "-p", "config_overrides:=" + json.dumps(overrides)], ends=True))
     if args.record:
         nodes.append(NodeProcess.taiji2("recorder", ["bag", "record", "-a", "-x", "^/(onboard|taiji2/sim)/", "-o",

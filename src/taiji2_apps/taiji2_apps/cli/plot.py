@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from taiji2_apps.maneuver_choice import MANEUVER_HELP, choose_maneuver
+from taiji2_model.maneuver_choice import MANEUVER_HELP, choose_maneuver
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -21,7 +21,7 @@ import sys
 from typing import Any
 
 from taiji2_apps.cli.exit_status import ExitStatus
-from taiji2_apps.maneuver_choice import MANEUVER_HELP, choose_maneuver
+from taiji2_model.maneuver_choice import MANEUVER_HELP, choose_maneuver
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

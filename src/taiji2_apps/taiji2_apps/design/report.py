@@ -119,7 +119,7 @@ def write_report(out: Path, report: dict, plots: bool = True) -> None:
              f"{report['constraints']['max_attitude_rad']:g} rad. Binding constraint of the design: "
              f"**{report['binding_constraint']}**. Seed {report['seed']}, {report['evaluations']} evaluations, "
              f"{report['wall_s']:.0f} s.", "", _search_line(report), "",
-             f"Maneuver file: `{report['maneuver_file']}` (maneuver_commander `maneuver_file`).", "",
+             f"Maneuver file: `{report['maneuver_file']}` (maneuver_commander `maneuver`).", "",
              "| parameter | paper CRLB/req | design CRLB/req | paper: T met [h] | design: T met [h] |",
              "|---|---|---|---|---|"]
     for n in PARAMETER_NAMES:

@@ -206,11 +206,14 @@ def _plots(result: DiagnosisResult, out: Path) -> list[str]:
     figure = Figure(figsize=(15, 16))
     FigureCanvasAgg(figure)
     axes = figure.subplots(5, 3)
+    effects_drawn = not np.allclose(plots["psd_after"], plots["psd_before"])
     for c, name in enumerate(CHANNELS):
         ax = axes[c // 3][c % 3]
         ax.loglog(freq, np.sqrt(plots["psd_before"][:, c] * to_asd), color="tab:red", lw=1.2, label="residual, nominal")
-        ax.loglog(freq, np.sqrt(plots["psd_after"][:, c] * to_asd), color="tab:blue", lw=1.2,
-                  label="residual, with effects")
+        # a line equal to another is not drawn (it would hide under it yet be listed in the legend)
+        if not np.allclose(plots["psd_after"][:, c], plots["psd_before"][:, c]):
+            ax.loglog(freq, np.sqrt(plots["psd_after"][:, c] * to_asd), color="tab:blue", lw=1.2,
+                      label="residual, with effects")
         ax.loglog(freq, np.sqrt(plots["psd_model"][:, c] * to_asd), color="k", lw=1.0, ls="--", label="nominal noise")
         if not np.allclose(plots["psd_model_after"][:, c], plots["psd_model"][:, c]):
             ax.loglog(freq, np.sqrt(plots["psd_model_after"][:, c] * to_asd), color="gray", lw=1.0, ls=":",
@@ -219,7 +222,8 @@ def _plots(result: DiagnosisResult, out: Path) -> list[str]:
         ax.set_title(f"{name} [{_UNITS[group]}/rtHz]", fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
         if c == 0:
-            ax.legend(fontsize=7)
+            ax.legend(fontsize=7, title=None if effects_drawn else "no effect accepted: residual = nominal's",
+                      title_fontsize=7)
         if c // 3 == 4:
             ax.set_xlabel("frequency [Hz]")
     figure.suptitle(f"Residual ASD vs nominal noise - {result.verdict.get('summary', '')}"[:150], fontsize=11)

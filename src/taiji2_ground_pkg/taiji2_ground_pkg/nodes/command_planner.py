@@ -1,7 +1,8 @@
 """command_planner (ground): the maneuver as time-tagged command tables (ECSS PUS TC[11,4]) uplinked in passes.
 
-Turns the maneuver (a layout's square wave or a ``maneuver_file`` of ``taiji2 design``; ``start_s`` and
-``duration_s`` as maneuver_commander) into activities on the command grid (one per torque change,
+Turns the maneuver (``maneuver``, as every verb's ``--maneuver``: the layout's shipped design by default,
+``paper`` its square wave, or a maneuver file of ``taiji2 design``; ``start_s`` and ``duration_s`` as
+maneuver_commander) into activities on the command grid (one per torque change,
 :func:`taiji2_ground_pkg.uplink_plan.maneuver_activities`), assigns them to passes of the link
 model's contact schedule within the onboard schedule's capacity
 (:func:`~taiji2_ground_pkg.uplink_plan.plan_uplinks`; a maneuver that cannot be carried ends the
@@ -20,9 +21,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from taiji2_ground_pkg.uplink_plan import maneuver_activities, plan_uplinks
-from taiji2_model.config import load_config
-from taiji2_model.maneuver import SquareWaveManeuver
-from taiji2_model.maneuver_families import load_maneuver_file
+from taiji2_model.maneuver_choice import MANEUVER_HELP, choose_maneuver
 from taiji2_runtime import link_topics as lt
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.node_parameters import read_only
@@ -41,18 +40,15 @@ class CommandPlanner(rclpy.node.Node):
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("command_planner", **node_kwargs)
         dp = self.declare_parameter
-        preset = dp("preset", "type1", read_only("layout whose square wave is flown (type1 | type2)")).value
-        maneuver_file = dp("maneuver_file", "", read_only("maneuver file instead of the preset")).value
+        preset = dp("preset", "type1", read_only("layout whose maneuver (design or paper) is flown: type1 | type2")
+                    ).value
+        asked = dp("maneuver", "", read_only(f"{MANEUVER_HELP}; empty: the default")).value
         start_s = dp("start_s", -1.0, read_only("maneuver start [s] (-1: the preset's or the file's)")).value
         duration_s = dp("duration_s", -1.0, read_only("maneuver duration [s] (-1: the preset's or file's)")).value
         dt_s = 1.0 / dp("command_rate_hz", 10.0, read_only("command grid rate [Hz]")).value
         self.model = load_link_model(dp("link_model", "ideal", read_only(
             "the link model whose passes, light time and onboard schedule the plan follows")).value)
-        if maneuver_file:
-            maneuver = load_maneuver_file(maneuver_file)
-        else:
-            m = load_config(preset).maneuver
-            maneuver = SquareWaveManeuver(m.period_s, m.amplitude_n_m, m.phase_s, m.start_s, m.duration_s)
+        maneuver = choose_maneuver(preset, asked or None, None).maneuver  # ValueError: one line naming the choice
         if start_s >= 0:
             maneuver.start_s = float(start_s)
         if duration_s >= 0:

@@ -10,6 +10,7 @@ Keys
 ``taiji2.sim.provenance``          the simulator's provenance JSON (config, seed, t0, effects), verbatim
 ``taiji2.sim.seed``                the run seed, from that JSON
 ``taiji2.sim.layout``              the layout name (type1 / type2 / file), from that JSON
+``taiji2.sim.maneuver``            what was flown, in words (the ``maneuver`` label of that JSON)
 """
 
 from __future__ import annotations
@@ -76,4 +77,29 @@ def simulator_provenance(text: str) -> dict[str, str]:
         config = parsed.get("config")
         if isinstance(config, dict) and "layout" in config:
             data["taiji2.sim.layout"] = str(config["layout"])
+        label = maneuver_label(parsed)
+        if label:
+            data["taiji2.sim.maneuver"] = label
     return data
+
+
+def maneuver_label(provenance: object) -> str | None:
+    """What was flown, in words, from a run's provenance (``{"maneuver": {"label": ...}}``), or None."""
+    maneuver = provenance.get("maneuver") if isinstance(provenance, dict) else None
+    label = maneuver.get("label") if isinstance(maneuver, dict) else None
+    return str(label) if label else None
+
+
+def flown_maneuver(custom_data: dict[str, str]) -> str | None:
+    """What a recording's run flew, in words, from its custom data (a recorder's bag: ``taiji2.sim.maneuver``;
+    a ``taiji2 simulate`` bag: the ``maneuver`` of ``taiji2.provenance``), or None when it does not say."""
+    if custom_data.get("taiji2.sim.maneuver"):
+        return custom_data["taiji2.sim.maneuver"]
+    for key in ("taiji2.provenance", SIM_PROVENANCE_KEY):
+        try:
+            label = maneuver_label(json.loads(custom_data.get(key, "")))
+        except ValueError:
+            continue
+        if label:
+            return label
+    return None

@@ -1,8 +1,10 @@
 """maneuver_commander: publishes the square-wave calibration torque on /taiji2/maneuver/command.
 
-Thin ROS glue around :class:`taiji2_model.maneuver.SquareWaveManeuver`, or any maneuver
-family of :mod:`taiji2_model.maneuver_families` read from ``maneuver_file`` (e.g. written by
-``taiji2 design``; the square-wave keys are then ignored). Parameters are
+Thin ROS glue around the maneuver that ``maneuver`` names, as every ``taiji2`` verb's ``--maneuver``
+(:mod:`taiji2_model.maneuver_choice`): ``design`` (the default where the layout ``preset`` has one: its
+shipped ``taiji2 design``), ``paper`` (the layout's square wave, whose keys ``period_s`` ... may be
+overridden) or a maneuver file of any family of :mod:`taiji2_model.maneuver_families` (the square-wave
+keys are then ignored). Parameters are
 documented in ``config/maneuver_commander.yaml``. The command is published at every tick of
 ``publish_rate_hz`` on the node clock (so at each change, delayed by at most one tick, and at least
 at 1 Hz); on simulated time (``use_sim_time``) every tick follows /clock, which lets the simulator
@@ -19,7 +21,8 @@ import numpy as np
 from taiji2_model.config import builtin_layouts, load_config
 from taiji2_model.contract import COMMAND_TOPIC
 from taiji2_model.maneuver import SquareWaveManeuver
-from taiji2_model.maneuver_families import check_thrust, load_maneuver_file, maneuver_spec
+from taiji2_model.maneuver_choice import MANEUVER_HELP, choose_maneuver
+from taiji2_model.maneuver_families import check_thrust, maneuver_spec
 from taiji2_runtime import node_parameters
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages, rclpy
@@ -46,11 +49,11 @@ class ManeuverCommander(rclpy.node.Node):
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("maneuver_commander", **node_kwargs)
         preset = self.declare_parameter(
-            "preset", "type1", _descriptor(f"nominal maneuver of a layout: {', '.join(builtin_layouts())}")
-        ).value
+            "preset", "type1",
+            _descriptor(f"layout whose maneuver (design or paper) is flown: {', '.join(builtin_layouts())}")).value
         layout = load_config(preset)
         nominal = layout.maneuver
-        p = {
+        p: dict[str, Any] = {
             "period_s": self.declare_parameter(
                 "period_s", float(nominal.period_s), _descriptor("square-wave period [s]")).value,
             "amplitude_n_m": self.declare_parameter(
@@ -80,11 +83,16 @@ class ManeuverCommander(rclpy.node.Node):
         lever_arm_m = self.declare_parameter(
             "thruster_lever_arm_m", float(thrusters.lever_arm_m),
             _descriptor("lever arm of the thruster making each axis' torque [m]; thrust = |torque| / arm")).value
-        maneuver_file = self.declare_parameter(
-            "maneuver_file", "", _descriptor("maneuver file (YAML/JSON, any family: square | multisine | "
-                                             "piecewise, e.g. from taiji2 design); empty: the square wave of "
-                                             "the keys above")).value
-        self._maneuver = load_maneuver_file(maneuver_file) if maneuver_file else SquareWaveManeuver(**p)
+        asked = self.declare_parameter("maneuver", "", _descriptor(
+            f"{MANEUVER_HELP}; empty: the default; with paper the square-wave keys above apply")).value
+        preset_square = {"period_s": nominal.period_s, "amplitude_n_m": nominal.amplitude_n_m,
+                         "phase_s": nominal.phase_s, "start_s": nominal.start_s, "duration_s": nominal.duration_s}
+        square_keys_set = any(not np.array_equal(np.asarray(p[k], dtype=float), np.asarray(v, dtype=float))
+                              for k, v in preset_square.items())
+        # square-wave keys set without a maneuver describe a square wave: the paper's, modified
+        # ValueError (one line naming the choice) when the choice cannot be flown
+        self._choice = choose_maneuver(preset, asked or ("paper" if square_keys_set else None), None, preset=layout)
+        self._maneuver = SquareWaveManeuver(**p) if self._choice.kind == "paper" else self._choice.maneuver
         # refuse a maneuver the micro-thrusters cannot fly (ManeuverError names the axis)
         check_thrust(self._maneuver, thrusters.min_thrust_n, thrusters.max_thrust_n, lever_arm_m)
         self._wrench_type = messages.geometry_msgs.WrenchStamped
@@ -102,11 +110,11 @@ class ManeuverCommander(rclpy.node.Node):
         self._first_command_timer = self.create_timer(
             0.02, self._publish_first_command,
             clock=rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME))
-        if maneuver_file:
-            self.get_logger().info(f"maneuver file {maneuver_file}: {maneuver_spec(self._maneuver)}")
+        if self._choice.kind != "paper":
+            self.get_logger().info(f"{self._choice.label} ({self._choice.file}): {maneuver_spec(self._maneuver)}")
         else:
             self.get_logger().info(
-                f"preset {preset}: period {p['period_s']} s, amplitude {p['amplitude_n_m']} N m, "
+                f"{self._choice.label}: period {p['period_s']} s, amplitude {p['amplitude_n_m']} N m, "
                 f"phase {p['phase_s']} s, start {p['start_s']} s, duration {p['duration_s']} s, "
                 f"{rate_hz} Hz on {'simulated' if self._sim_time else 'system'} time")
 

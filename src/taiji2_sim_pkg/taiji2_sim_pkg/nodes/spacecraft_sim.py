@@ -39,6 +39,7 @@ from taiji2_model.contract import (
     TRUE_COM_OFFSET_TOPIC_OF,
     TRUE_SCALE_FACTOR_TOPIC_OF,
 )
+from taiji2_model.maneuver_choice import MANEUVER_HELP, choose_maneuver
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.command_gate import CommandGate, CommandSchedule
@@ -107,7 +108,10 @@ class SpacecraftSim(rclpy.node.Node):
         if self._mode not in CLOCK_MODES:
             raise ValueError(f"clock_mode: {self._mode!r} is not one of {', '.join(CLOCK_MODES)}")
         duration_s = dp("duration_s", -1.0, _descriptor(
-            "simulated duration [s]; -1: the configured maneuver's end", float_range=(-1.0, 1e7))).value
+            "simulated duration [s]; -1: the end of the maneuver that maneuver names", float_range=(-1.0, 1e7))).value
+        asked = dp("maneuver", "", _descriptor(
+            f"the maneuver whose end is the default duration (the commander flies it): {MANEUVER_HELP}; "
+            "empty: the default (with config_file: its own maneuver section)")).value
         self._sync = dp("sync_with_command", True, _descriptor(
             "accelerated: step from t_k only after a command stamped >= t_k arrived")).value
         self._command_timeout_s = dp("command_timeout_s", 2.0, _descriptor(
@@ -135,7 +139,13 @@ class SpacecraftSim(rclpy.node.Node):
         config = load_config(config_file or layout, overrides=_overrides([o for o in overrides if o]))
         self._sim = Simulator(config, seed=None if seed < 0 else seed)
         self._dt_ns = round(config.dt_s * _NS)
-        end_s = config.maneuver.start_s + config.maneuver.duration_s if duration_s < 0 else duration_s
+        # overrides of the maneuver section describe the preset's square wave, modified
+        if not asked and any(o.strip().startswith("maneuver.") for o in overrides if o):
+            asked = "paper"
+        # what the commander flies (the commands come on the topic): its end is the default duration, its
+        # name goes into the provenance (bags and calibrate name it)
+        self._maneuver = choose_maneuver(layout, asked or None, None, config_file=config_file, preset=config)
+        end_s = self._maneuver.duration_s if duration_s < 0 else duration_s
         self._n_steps = round(end_s / config.dt_s)
         self._gate = CommandGate(config.thrusters.max_thrust_n * config.thrusters.lever_arm_m)
         self._schedule = CommandSchedule()
@@ -163,7 +173,8 @@ class SpacecraftSim(rclpy.node.Node):
         self._truth = _TruthPublishers(self, reliable_all, truth_kinematics) if self._publish_truth else None
         latched = rclpy.qos.QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
         self._provenance_pub = self.create_publisher(m.std_msgs.String, PROVENANCE_TOPIC, latched)
-        self._provenance_pub.publish(m.std_msgs.String(data=json.dumps(self._sim.provenance())))
+        self._provenance_pub.publish(m.std_msgs.String(data=json.dumps(
+            {**self._sim.provenance(), "maneuver": self._maneuver.provenance()})))
         self.create_subscription(m.geometry_msgs.WrenchStamped, COMMAND_TOPIC, self._on_command, reliable_all)
 
         if self._mode == "realtime":
