@@ -233,6 +233,6 @@ def test_runtime_and_node_suites_pass_under_real_rclpy(ros):
     # the runtime and node tests again, now with rclpy and the colcon-built messages; tests of the
     # embedded runtime's own internals skip themselves with their reason (test/conftest.py). Run alone
     # (not beside the CLI tests): its graphs and the ros2 CLI calls each bound their waits in wall time
-    out = ros(f"cd {REPO} && TAIJI2_RUNTIME=rclpy python3 -m pytest -q -p no:cacheprovider -n 0 -rs "
+    out = ros(f"cd {REPO} && TAIJI2_RUNTIME=rclpy python3 -m pytest -q -p no:cacheprovider -rs "
               "test/runtime test/nodes", timeout=900)
     assert out.returncode == 0, out.stdout[-6000:] + out.stderr[-2000:]
