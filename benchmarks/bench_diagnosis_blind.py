@@ -1,5 +1,8 @@
 """Blind benchmark of the sim-to-real gap diagnosis.
 
+Length (over 600 lines): one script a user runs as one command (draw, simulate, diagnose, score, shard,
+summarize); its pieces are used nowhere else.
+
 Generates data sets of 3 h (Type-1 by default) with none, one or two catalog effects drawn at
 random (family, variant, sign, magnitude near the detection limit), plus data sets with an effect
 the diagnoser does not know (a catalog effect left out of its candidates, or an effect defined only

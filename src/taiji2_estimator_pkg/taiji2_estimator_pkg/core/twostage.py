@@ -1,5 +1,9 @@
 """Two-stage (separate-bias) Kalman filter: a bias-free filter plus an innovations GLS.
 
+Length (over 600 lines): one class, :class:`TwoStageFilter`, whose two evaluation paths (``step`` and
+``run_regular``) must give the same numbers (tests hold them equal) and share its state and steady state;
+split, the two paths would drift apart.
+
 Model (linear Gaussian state space with constant unknown parameters theta)::
 
     x_k = F x_{k-1} + B (u0_k + U_k theta) + w_k,      w_k ~ N(0, Q)

@@ -1,5 +1,8 @@
 """Candidate model extensions: each catalog effect as a signature in the residual channels.
 
+Length (over 600 lines): the one table of signatures below and the factory of each variant it lists, side by
+side, so that a signature and its code are read and changed together.
+
 Every catalog effect (:mod:`taiji2_model.effect_catalog`) is split into *variants*, one per
 GRS / axis / readout it can act on, each with one parameter (two for the gravity gradient: the
 quadrature pair of its 2n harmonic), in the SI unit of the simulator's parameter, so that a fitted
