@@ -113,7 +113,8 @@ class ScaleFactorEstimator:
         p = self.model.n_params
         info[:p, :p] -= np.diag(self.st_correction_sum)
         if self.n_diff:
-            info[:p, :p] += self.diff_moment - self.n_diff * self.model.cls_correction
+            # the pair's information without its noise along the scale it cannot see (ScaleFactorModel.pair_information)
+            info[:p, :p] += self.model.pair_information(self.diff_moment, self.n_diff)
         return info, self.filter.vector
 
     def _check_determined(self, info: np.ndarray) -> bool:

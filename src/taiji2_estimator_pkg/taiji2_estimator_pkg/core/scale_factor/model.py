@@ -131,10 +131,47 @@ class ScaleFactorModel:
                 correction[3 * block:3 * block + 3] = var / instrument.nominal_scale_factors[g] ** 2 \
                     * np.diag(projected)
             self.cls_correction = np.diag(correction)
+            self.pair_null_dimension = self._pair_null_dimension()
         else:
             self.w_diff = None
             self.w_diff_chol = None
             self.cls_correction = None
+            self.pair_null_dimension = 0
+
+    def _pair_null_dimension(self) -> int:
+        """The number of directions of G the GRS pair cannot see (2 for the built-in layouts: the common
+        scale of (phi, theta) and of psi): ``6 - rank`` of ``D_0(e_j)`` stacked over unit accelerations
+        e_j about the CRF axes (``D_0`` is linear in the acceleration), at the nominal G."""
+        g_nominal = {g: np.asarray(self.instrument.nominal_scale_factors[g], dtype=np.float64) for g in self.grs_ids}
+        rows = []
+        for axis in range(3):
+            unit = np.zeros(3)
+            unit[axis] = 1.0
+            differences = np.stack([self.c[g] @ unit / g_nominal[g] for g in self.grs_ids])  # U~ = C a / G [V]
+            rows.append(self.difference_regressor(differences))
+        singular = np.linalg.svd(np.vstack(rows), compute_uv=False)
+        return 6 - int(np.sum(singular > 1e-9 * singular[0]))
+
+    def pair_information(self, moment: np.ndarray, n_pairs: int) -> np.ndarray:
+        """(6, 6) information of the GRS pair: ``sum D^T W D - n K`` without its curvature along the
+        directions it cannot see.
+
+        The pair's equation ``D G = e_1 - e_2`` is homogeneous: it measures the direction of G (the
+        ratios of the two GRS), not its scale. Noise-free its information ``A_0`` is zero along the
+        ``k`` directions ``delta_g = c G_g`` (:meth:`_pair_null_dimension`). The CLS-corrected sum is not:
+        its fluctuation (std ``sqrt(2 n) K``) leaves a curvature ``a`` there, of either sign, and a
+        homogeneous quadratic ``G^T A G`` with curvature along G itself pulls the whole scale towards zero
+        (or pushes it away) by ``a / I`` of G: ``a / I / sigma_rel`` sigmas, 1-3 per seed on the
+        range-limited designs, where the two-GRS estimate's error was 1.2-1.5 times its reported sigma
+        (CHANGELOG.md, 2026-11-29). In the coordinates relative to the nominal G, the ``k`` smallest
+        eigenvalues of the sum are set to zero: its own eigenvectors keep the ratios the data measure,
+        the scale is left to the star tracker.
+        """
+        scale = np.concatenate([self.instrument.nominal_scale_factors[g] for g in self.grs_ids])
+        relative = (moment - n_pairs * self.cls_correction) * scale[:, None] * scale[None, :]
+        values, vectors = np.linalg.eigh(0.5 * (relative + relative.T))
+        values[:self.pair_null_dimension] = 0.0
+        return (vectors * values) @ vectors.T / scale[:, None] / scale[None, :]
 
     def regressor_noise_correction(self, gramian: np.ndarray) -> dict[tuple[int, ...], np.ndarray]:
         """Per-step bias of the star-tracker information from the readout noise in the input.
