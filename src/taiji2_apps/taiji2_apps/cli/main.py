@@ -39,6 +39,7 @@ VERBS = {
     "design": "taiji2_apps.cli.design",
     "diagnose": "taiji2_apps.cli.diagnose",
     "experiment": "taiji2_apps.cli.experiment",
+    "ground": "taiji2_apps.cli.ground",
     "plot": "taiji2_apps.cli.plot",
     "simulate": "taiji2_apps.cli.simulate",
 }

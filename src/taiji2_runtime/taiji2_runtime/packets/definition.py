@@ -75,12 +75,19 @@ class StreamDefinition:
         The raw-data contract topic whose samples the packets carry.
     fields : tuple of str
         User-data fields, in order, each one big-endian binary64 in the contract's units.
+    units : tuple of str
+        The contract's unit of each field (``""``: dimensionless), as the XTCE database declares them.
     """
 
     name: str
     apid: int
     topic: str
     fields: tuple[str, ...]
+    units: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.units) != len(self.fields):
+            raise ValueError(f"stream {self.name}: {len(self.fields)} fields but {len(self.units)} units")
 
     @property
     def user_data_octets(self) -> int:
@@ -106,14 +113,15 @@ class StreamDefinition:
 
 
 _COV = tuple(f"attitude_covariance[{i}]" for i in range(9))
+_GRS = ("vx1", "vx2", "vy1", "vy2", "vz1", "vz2")
 STREAMS: tuple[StreamDefinition, ...] = (
     StreamDefinition("star_tracker", 0x101, STAR_TRACKER_TOPIC,
-                     ("attitude.x", "attitude.y", "attitude.z", "attitude.w", *_COV)),
-    StreamDefinition("grs1", 0x111, GRS_TOPICS[0], ("vx1", "vx2", "vy1", "vy2", "vz1", "vz2")),
-    StreamDefinition("grs2", 0x112, GRS_TOPICS[1], ("vx1", "vx2", "vy1", "vy2", "vz1", "vz2")),
+                     ("attitude.x", "attitude.y", "attitude.z", "attitude.w", *_COV), ("",) * 4 + ("rad^2",) * 9),
+    StreamDefinition("grs1", 0x111, GRS_TOPICS[0], _GRS, ("V",) * 6),
+    StreamDefinition("grs2", 0x112, GRS_TOPICS[1], _GRS, ("V",) * 6),
     StreamDefinition("executed_torque", 0x121, COMMAND_TOPIC,
                      ("wrench.torque.x", "wrench.torque.y", "wrench.torque.z",
-                      "wrench.force.x", "wrench.force.y", "wrench.force.z")),
+                      "wrench.force.x", "wrench.force.y", "wrench.force.z"), ("N m",) * 3 + ("N",) * 3),
 )
 STREAM_BY_APID: dict[int, StreamDefinition] = {s.apid: s for s in STREAMS}
 APIDS: tuple[int, ...] = tuple(STREAM_BY_APID)
