@@ -50,8 +50,9 @@ INSERT_ACTIVITIES = 4
 REPORT_APID = 0x141
 FAILURE_LATE = 1  # an activity's release time was before its arrival plus the time margin
 FAILURE_CAPACITY = 2  # the onboard schedule was full
-#: instructions per TC[11,4]: 8 + 69 octets each, a packet of at most ~4 kB
-MAX_ACTIVITIES_PER_TC = 50
+#: instructions per TC[11,4]: 8 + 69 octets each, a packet of at most 15 + 12 x 77 = 939 octets, so that one
+#: packet fits one SDLS-secured TC transfer frame (987 octets of frame data, :mod:`.sdls`)
+MAX_ACTIVITIES_PER_TC = 12
 _INSTRUCTION_OCTETS = 8 + TC_PACKET_OCTETS
 
 
