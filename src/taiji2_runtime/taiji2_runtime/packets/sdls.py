@@ -174,12 +174,19 @@ class FrameVerifier:
         try:
             data = self._check(bytes(frame))
         except FrameRefused as exc:
-            self.refused[exc.reason] += 1
-            self._alarm = True
-            self._flags.add(exc.reason)
+            self.count_refused(exc.reason)
             raise
         self.accepted += 1
         return data
+
+    def count_refused(self, reason: str) -> None:
+        """Count a refusal found before a frame could be delimited (e.g. a burst cut short): ``reason`` one of
+        :data:`REFUSAL_REASONS`."""
+        if reason not in REFUSAL_REASONS:
+            raise ValueError(f"refusal reason {reason!r}")
+        self.refused[reason] += 1
+        self._alarm = True
+        self._flags.add(reason)
 
     def _check(self, frame: bytes) -> bytes:
         try:
