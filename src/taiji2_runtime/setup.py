@@ -18,6 +18,6 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
     ],
     package_data={PACKAGE: ["py.typed"]},
-    install_requires=["numpy", "PyYAML", "taiji2_model", "rosbags", "cyclonedds", "threadpoolctl", "spacepackets"],
+    install_requires=["numpy", "PyYAML", "taiji2_model", "rosbags", "cyclonedds", "threadpoolctl", "spacepackets", "cryptography"],
     python_requires=">=3.10",
 )

@@ -10,7 +10,9 @@ from spacepackets.ecss.tc import PusTc
 from taiji2_ground_pkg.uplink_plan import PlanError, maneuver_activities, plan_uplinks
 from taiji2_model.maneuver import SquareWaveManeuver
 from taiji2_runtime.packets.scheduling import (
+    ACCEPTANCE_FAILURE_CODES,
     FAILURE_LATE,
+    MAX_ACTIVITIES_PER_TC,
     Activity,
     decode_insert_activities,
     decode_report,
@@ -22,7 +24,7 @@ from taiji2_sim_pkg.core.onboard_schedule import OnboardSchedule
 
 
 def test_insert_activities_and_reports_through_spacepackets():
-    acts = [Activity(10**9 * (600 + k), (1e-6 * k, -2e-6, 3e-6)) for k in range(50)]
+    acts = [Activity(10**9 * (600 + k), (1e-6 * k, -2e-6, 3e-6)) for k in range(MAX_ACTIVITIES_PER_TC)]
     packet = encode_insert_activities(7, acts, first_request_seq=100)
     parsed = PusTc.unpack(packet)
     assert (parsed.service, parsed.message_subtype, parsed.apid, parsed.seq_count) == (11, 4, 0x140, 7)
@@ -32,6 +34,12 @@ def test_insert_activities_and_reports_through_spacepackets():
     report = decode_report(encode_report(8, tc, 5 * 10**9, seq_count=3, failure_code=FAILURE_LATE, refused=4))
     assert (report.subtype, report.tc_seq_count, report.failure_code, report.refused) == (8, 7, FAILURE_LATE, 4)
     assert decode_report(encode_report(1, tc, 10**9, seq_count=4)).subtype == 1
+    # an acceptance failure reports on the raw packet's request id (TM[1,2], the defect's code)
+    code = ACCEPTANCE_FAILURE_CODES["wrong_length"]
+    report = decode_report(encode_report(2, packet[:40], 10**9, seq_count=5, failure_code=code))
+    assert (report.subtype, report.tc_seq_count, report.failure_code) == (2, 7, code)
+    with pytest.raises(ValueError):
+        encode_insert_activities(0, acts + acts[:1])
 
 
 def test_onboard_schedule_refuses_late_and_full_never_executes_late():

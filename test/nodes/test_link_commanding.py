@@ -1,6 +1,7 @@
-"""PUS 11 commanding on DDS: command_planner -> space_link -> onboard_executor on the graph's clock. The
-executor flies the maneuver exactly; a table delayed by a missed pass is refused as late (TM[1,8]) and
-never executed, the maneuver stopped safely until the next table."""
+"""PUS 11 commanding on DDS: command_planner -> space_link -> onboard_executor on the graph's clock, the
+telecommands in SDLS-signed TC frames (a key file of the test's own). The executor flies the maneuver
+exactly; a table delayed by a missed pass is refused as late (TM[1,8]) and never executed, the maneuver
+stopped safely until the next table; every frame authenticated, none refused."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from taiji2_model.config import load_config
 from taiji2_model.maneuver import SquareWaveManeuver
 from taiji2_runtime import link_topics as lt
 from taiji2_runtime.packets.scheduling import FAILURE_LATE, decode_report
+from taiji2_runtime.packets.sdls_keys import new_key_table, write_key_file
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.nodes.onboard_executor import OnboardExecutor
 from taiji2_sim_pkg.nodes.space_link import SpaceLink
@@ -28,11 +30,14 @@ command_lead_s: 2.0
 def test_planned_tables_flown_on_time_and_late_table_refused(context, executor, tmp_path):
     (tmp_path / "m.yaml").write_text(MODEL)
     model = str(tmp_path / "m.yaml")
-    planner = CommandPlanner(context=context, cli_args=["--ros-args", "-p", f"link_model:={model}",
+    keys = write_key_file(tmp_path / "keys.json", new_key_table((3, 4)))
+    planner = CommandPlanner(context=context, cli_args=["--ros-args", "-p", f"link_model:={model}", "-p",
+                                                        f"key_file:={keys}", "-p", "maneuver:=paper",
                                                         "-p", "start_s:=20.0", "-p", "duration_s:=300.0"])
     link = SpaceLink(context=context, cli_args=["--ros-args", "-p", f"model:={model}", "-p", "missed_contacts:=[1]"])
     onboard = OnboardExecutor(context=context, cli_args=["--ros-args", "-p", "use_sim_time:=true", "-p",
-                                                         "schedule_capacity:=100", "-p", "time_margin_s:=2.0"])
+                                                         "schedule_capacity:=100", "-p", "time_margin_s:=2.0",
+                                                         "-p", f"key_file:={keys}"])
     probe = rclpy.node.Node("probe", context=context)
     for n in (planner, link, onboard, probe):
         executor.add_node(n)
@@ -64,3 +69,5 @@ def test_planned_tables_flown_on_time_and_late_table_refused(context, executor, 
     late = [r for r in reports if r.subtype == 8]
     assert late and late[0].failure_code == FAILURE_LATE and abs(late[0].onboard_ns / 1e9 - arrival_1) < 1.0
     assert onboard.schedule.refused_late > 0 and sum(r.subtype == 1 for r in reports) == len(planner.plan)
+    assert planner.signer.spi == 4 and onboard.verifier.accepted == len(planner.plan)
+    assert sum(onboard.verifier.refused.values()) == 0 and onboard.verifier.last_sequence == {4: len(planner.plan)}

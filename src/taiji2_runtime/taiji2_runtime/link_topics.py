@@ -15,14 +15,15 @@ from __future__ import annotations
 from typing import Any
 
 from taiji2_model.contract import RAW_TOPICS
+from taiji2_runtime.packets.tc_frame import split_frames
 from taiji2_runtime.ros import messages, rclpy
 
 ONBOARD_NS = "/onboard"
 GROUND_NS = "/ground"
 ONBOARD_TM = "/onboard/link/tm"  # telemetry packets the onboard transmitter takes (packetizer -> link)
-ONBOARD_TC = "/onboard/link/tc"  # telecommand packets received onboard (link -> command executor)
+ONBOARD_TC = "/onboard/link/tc"  # telecommand frames received onboard (link -> command executor)
 GROUND_TM = "/ground/link/tm"  # telemetry packets the ground station received (link -> ground receiver)
-GROUND_TC = "/ground/link/tc"  # telecommand packets the ground sends (planner -> link)
+GROUND_TC = "/ground/link/tc"  # telecommand frames the ground sends (planner -> link; SDLS-secured TC frames)
 RECEPTION_TOPIC = "/ground/link/reception"  # ground receiver: what has been released, when (JSON)
 LINK_REPORT_TOPIC = "/taiji2/sim/link_report"  # the link's own account (evaluation only, like /taiji2/sim/)
 CONTRACT_TOPICS = tuple(RAW_TOPICS)
@@ -88,6 +89,21 @@ def split(msg: Any) -> list[bytes]:
     if len(out) != len(msg.times_ns):
         raise ValueError(f"SpacePackets: {len(out)} packets but {len(msg.times_ns)} times")
     return out
+
+
+def split_tc_frames(msg: Any) -> list[bytes]:
+    """The TC transfer frames of a ``SpacePackets`` message of the uplink (the units back to back are frames
+    there, delimited by their length fields; :mod:`taiji2_runtime.packets.tc_frame`).
+
+    Raises
+    ------
+    ValueError
+        If the octets do not divide into whole frames, or their number differs from ``times_ns``.
+    """
+    frames = split_frames(bytes(msg.data))
+    if len(frames) != len(msg.times_ns):
+        raise ValueError(f"SpacePackets: {len(frames)} frames but {len(msg.times_ns)} times")
+    return frames
 
 
 def apid_of(packet: bytes) -> int:

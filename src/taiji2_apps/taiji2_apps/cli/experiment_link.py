@@ -37,6 +37,10 @@ def add_link_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--link-fault", action="append", default=[],
                         help="a link fault: missed_contact:K (pass K missed entirely) or lost_uplink:K "
                              "(repeatable; K = 0 is the first pass)")
+    parser.add_argument("--key-file", default="",
+                        help="SDLS key file (docs/security.md) the planner signs the uplink with and the spacecraft "
+                             "checks it against (its highest active SPI signs); default: a throwaway key made for "
+                             "this run in a private temporary directory, removed at the end")
 
 
 def estimate_stamps_ns(msg: Any) -> tuple[int, int]:
@@ -262,6 +266,28 @@ def format_link_report(link: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def link_key_file(given: str) -> tuple[str, Any]:
+    """The key file of the run: ``given`` (checked to load), else a throwaway one (one random SPI-1 key) in a new
+    private temporary directory, never the repository or ``--out``; with the callable that removes it.
+
+    Raises
+    ------
+    ValueError
+        ``given`` is not a usable key file (the message names why, never a key).
+    """
+    import shutil
+    import tempfile
+
+    from taiji2_runtime.packets.sdls_keys import load_key_file, new_key_table, write_key_file
+
+    if given:
+        load_key_file(given).newest_active()  # KeyFileError (a ValueError) or no active SPI
+        return str(Path(given).resolve()), lambda: None
+    folder = tempfile.mkdtemp(prefix="taiji2-keys-")  # mode 0700
+    path = write_key_file(Path(folder) / "sdls_keys.json", new_key_table((1,)))
+    return str(path), lambda: shutil.rmtree(folder, ignore_errors=True)
+
+
 def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) -> int:
     """``taiji2 experiment --link``: the whole run (see the module docstring); ``plan`` is the checked experiment
     (:func:`taiji2_apps.experiment_setup.plan_experiment`), ``temporary``: ``args.out`` is removed at the end."""
@@ -303,6 +329,11 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         print(f"error: taiji2 experiment: --duration-s {duration_s:g} ends before the first command table can be "
               f"onboard ({start_s:g} s)", file=sys.stderr)
         return ExitStatus.BAD_INPUT
+    try:
+        key_file, remove_key = link_key_file(args.key_file)
+    except ValueError as exc:
+        print(f"error: taiji2 experiment: --key-file: {exc}", file=sys.stderr)
+        return ExitStatus.BAD_INPUT
     # every relay holds its output until the readers of this graph have matched it (nodes/subscribed_publisher.py):
     # star tracker (scale factors; the paper's d too), GRS (both estimators), executed torque, reception (this
     # monitor, the planner); the recorder reads every ground topic
@@ -322,10 +353,11 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         "onboard_executor": ["run", "taiji2_sim_pkg", "onboard_executor", "--ros-args", "-r", "__ns:=/onboard",
                              "-p", "use_sim_time:=true", "-p", "lookahead_s:=10.0",
                              "-p", f"schedule_capacity:={model.onboard_schedule_capacity}",
-                             "-p", f"time_margin_s:={model.command_lead_s}"],
+                             "-p", f"time_margin_s:={model.command_lead_s}", "-p", f"key_file:={key_file}"],
         "command_planner": ["run", "taiji2_ground_pkg", "command_planner", "--ros-args", "-r", "__ns:=/ground",
                             "-p", f"preset:={args.layout}", "-p", f"link_model:={args.link}",
                             "-p", f"start_s:={start_s}", "-p", f"duration_s:={duration_s - start_s}",
+                            "-p", f"key_file:={key_file}",
                             *[a for p in commander_maneuver for a in ("-p", p)]],
     }
     # the simulator exits (0) at the end of its data; every other node runs until stopped (what ends the run is
@@ -386,6 +418,7 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
+        remove_key()
 
     return run_to_status(graph, lambda result: _report(args, plan, model, link_seed, monitor, out, duration_s,
                                                        result.wall_s, temporary), cleanup)

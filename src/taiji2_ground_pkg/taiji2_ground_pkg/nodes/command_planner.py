@@ -11,7 +11,9 @@ hands them to the link (``/ground/link/tc``), each stamped with the ground time 
 sent (its pass's start); the plan is latched on ``/ground/commanding/plan`` (JSON). It then follows the
 onboard verification reports the ground receives (``/ground/link/reception``): a table without an
 acceptance report once a later table's report or the end of the data has come is named "command table
-lost on uplink" on ``/diagnostics``. Parameters: ``config/command_planner.yaml``.
+lost on uplink" on ``/diagnostics``, a TM[1,2] "refused at acceptance". Without a usable key file it plans
+but sends nothing (the spacecraft would refuse unsigned frames) and says so on ``/diagnostics``.
+Parameters: ``config/command_planner.yaml``.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ from taiji2_runtime import link_topics as lt
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.scheduling import MAX_ACTIVITIES_PER_TC, Activity, encode_insert_activities
+from taiji2_runtime.packets.sdls import FrameSigner
+from taiji2_runtime.packets.sdls_keys import KeyFileError, key_file_warning, load_key_file
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.link import load_link_model
 
@@ -48,6 +52,10 @@ class CommandPlanner(rclpy.node.Node):
         dt_s = 1.0 / dp("command_rate_hz", 10.0, read_only("command grid rate [Hz]")).value
         self.model = load_link_model(dp("link_model", "ideal", read_only(
             "the link model whose passes, light time and onboard schedule the plan follows")).value)
+        key_file = dp("key_file", "", read_only("SDLS key file the frames are signed with (docs/security.md)")).value
+        spi = dp("spi", -1, read_only("SPI to sign with (-1: the key file's highest active SPI)")).value
+        first_sequence = dp("first_sequence", 1, read_only(
+            "the first frame's SDLS sequence number (IV counter); above the last the spacecraft accepted")).value
         maneuver = choose_maneuver(preset, asked or None, None).maneuver  # ValueError: one line naming the choice
         if start_s >= 0:
             maneuver.start_s = float(start_s)
@@ -73,7 +81,10 @@ class CommandPlanner(rclpy.node.Node):
                 request += len(part)
         self._accepted: set[int] = set()
         self._refused: dict[int, int] = {}
+        self._rejected: dict[int, int] = {}
         self._lost: list[int] = []
+        self.signer, self._key_problem = self._signer(key_file, spi, first_sequence)
+        self._frames = [self.signer.sign(p) for p in self._packets] if self.signer else []
         qos = lt.reliable_all()
         self._tc_pub = self.create_publisher(messages.taiji2_msgs.SpacePackets, lt.GROUND_TC, qos)
         self._plan_pub = self.create_publisher(messages.std_msgs.String, PLAN_TOPIC, lt.latched())
@@ -86,10 +97,25 @@ class CommandPlanner(rclpy.node.Node):
         self.get_logger().info(f"{len(activities)} activities in {len(tables)} table(s), {len(self._packets)} "
                                f"TC[11,4] packet(s), passes {[t.contact for t in tables]}")
 
+    def _signer(self, key_file: str, spi: int, first_sequence: int) -> tuple[FrameSigner | None, str]:
+        """The frame signer, or None and why not (logged)."""
+        try:
+            if not key_file:
+                raise KeyFileError("no key_file")
+            signer = FrameSigner(load_key_file(key_file), None if spi < 0 else spi, first_sequence)
+        except (KeyFileError, ValueError) as exc:
+            problem = f"telecommands not sent: {exc}"
+            self.get_logger().error(f"{problem} (the spacecraft refuses frames without a valid MAC)")
+            return None, problem
+        warning = key_file_warning(key_file)
+        if warning:
+            self.get_logger().warn(warning)
+        return signer, ""
+
     def _send(self) -> None:
-        if self._tc_pub.get_subscription_count() == 0:
-            return  # the link is not there yet
-        self._tc_pub.publish(lt.burst(self._packets, self._ready_ns, lt.END_NS, end_of_data=True))
+        if self._tc_pub.get_subscription_count() == 0 or self.signer is None:
+            return  # the link is not there yet, or nothing can be signed
+        self._tc_pub.publish(lt.burst(self._frames, self._ready_ns, lt.END_NS, end_of_data=True))
         self._send_timer.cancel()
 
     def _on_reception(self, msg: Any) -> None:
@@ -99,13 +125,18 @@ class CommandPlanner(rclpy.node.Node):
                 self._accepted.add(r["tc_seq"])
             elif r["subtype"] == 8:
                 self._refused[r["tc_seq"]] = r["refused"]
+            elif r["subtype"] == 2:
+                self._rejected[r["tc_seq"]] = r["failure_code"]
         last = max(self._accepted, default=-1)
-        self._lost = [p["tc_seq"] for p in self.plan if p["tc_seq"] not in self._accepted
+        self._lost = [p["tc_seq"] for p in self.plan if p["tc_seq"] not in self._accepted and p["tc_seq"] not in
+                      self._rejected
                       and (p["tc_seq"] < last or state.get("end_of_data"))]
 
     def _publish_diagnostics(self) -> None:
         d = messages.diagnostic_msgs
-        problems = []
+        problems = [self._key_problem] if self._key_problem else []
+        if self._rejected:
+            problems.append(f"telecommands refused at acceptance (TM[1,2]): #{', #'.join(map(str, self._rejected))}")
         if self._lost:
             problems.append(f"command table lost on uplink: TC[11,4] #{', #'.join(map(str, self._lost))} "
                             "never acknowledged")
@@ -113,9 +144,11 @@ class CommandPlanner(rclpy.node.Node):
             problems.append(f"activities refused onboard: {sum(self._refused.values())} (late or over capacity)")
         status = d.DiagnosticStatus(name="command_planner", hardware_id="taiji2_ground",
                                     message="; ".join(problems) or "nominal")
-        status.level = d.DiagnosticStatus.WARN if problems else d.DiagnosticStatus.OK
+        status.level = (d.DiagnosticStatus.ERROR if self._key_problem else d.DiagnosticStatus.WARN if problems
+                        else d.DiagnosticStatus.OK)
         values = {"tables": len(self.plan), "acknowledged": len(self._accepted), "lost_on_uplink": self._lost,
-                  "refused_activities": sum(self._refused.values())}
+                  "refused_activities": sum(self._refused.values()), "rejected_at_acceptance": sorted(self._rejected),
+                  "spi": self.signer.spi if self.signer else None, "frames": len(self._frames)}
         status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in values.items()]
         self._diag_pub.publish(d.DiagnosticArray(status=[status]))
 

@@ -8,7 +8,8 @@ transmitted-through time has passed them. Publishes what it releases on the cont
 executed-torque packets; header stamp = onboard time through the time correlation) in stamp order,
 so the estimators, the recorder and ``taiji2 calibrate`` get in-order data with gaps. The onboard
 executor's verification reports (APID 0x141, PUS TM[1,x]) are decoded, deduplicated and passed on in
-the reception record (``command_reports``). After each
+the reception record (``command_reports``); its frame security reports (APID 0x141, TM[3,25]: the uplink
+frames the spacecraft refused, per reason) likewise, the latest in ``frame_security``. After each
 burst it publishes on ``/ground/link/reception`` (JSON) the ground time, the onboard time through
 which each stream has been released and the counts (received, released, duplicate, out_of_order,
 missing, held), and the same on ``/diagnostics`` (WARN naming missing samples) once a second of wall
@@ -33,6 +34,7 @@ from taiji2_runtime.entry import run_node
 from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.packetize import PacketError
 from taiji2_runtime.packets.scheduling import REPORT_APID, decode_report
+from taiji2_runtime.packets.sdls import decode_frame_security_report, is_frame_security_report
 from taiji2_runtime.packets.time_correlation import TimeCorrelation
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_runtime.subscribed_publisher import hold_until_subscribed
@@ -71,6 +73,7 @@ class GroundReceiver(rclpy.node.Node):
         self._samples_out = 0
         self._reports_seen: set[tuple[int, int]] = set()
         self._new_reports: list[dict[str, Any]] = []
+        self._frame_security: dict[str, Any] | None = None  # the latest frame security report (onboard time order)
         self._last_diagnostics: tuple[float, int] | None = None  # (monotonic time, level) of the last sent
         self._unsent_state: dict[str, Any] | None = None  # a reception record not yet on /diagnostics
         steady = rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME)
@@ -83,7 +86,9 @@ class GroundReceiver(rclpy.node.Node):
             self.get_logger().error(f"burst refused: {exc}", throttle_duration_sec=10.0)
             return
         for packet, receive_ns in zip(packets, msg.times_ns, strict=True):
-            if lt.apid_of(packet) == REPORT_APID:
+            if lt.apid_of(packet) == REPORT_APID and is_frame_security_report(packet):
+                self._on_frame_security(packet, int(receive_ns))
+            elif lt.apid_of(packet) == REPORT_APID:
                 self._on_report(packet, int(receive_ns))
             else:
                 self._rx.offer(packet, int(receive_ns))
@@ -115,6 +120,18 @@ class GroundReceiver(rclpy.node.Node):
                                   "ground_s": receive_ns / _NS, "failure_code": r.failure_code,
                                   "refused": r.refused})
 
+    def _on_frame_security(self, packet: bytes, receive_ns: int) -> None:
+        try:
+            fsr, onboard_ns = decode_frame_security_report(packet)
+        except PacketError as exc:
+            self._rx.rejected[f"report_{exc.kind}"] += 1
+            return
+        if self._frame_security is not None and onboard_ns <= self._frame_security["onboard_s"] * _NS:
+            return  # a duplicate or an older one played back late
+        self._frame_security = {"onboard_s": onboard_ns / _NS, "ground_s": receive_ns / _NS,
+                                "fsr": f"0x{fsr.fsr_word():08X}", "alarm": fsr.alarm, "last_spi": fsr.last_spi,
+                                "accepted": fsr.accepted, "refused": fsr.refused}
+
     def _publish_sample(self, r: ReleasedSample, t_ns: int) -> None:
         """Publish one released sample on its contract topic, stamped ``t_ns`` (contract time [ns])."""
         s = r.sample
@@ -145,7 +162,8 @@ class GroundReceiver(rclpy.node.Node):
                 "released_through_s": {k: (v / _NS if v >= 0 else None)
                                        for k, v in self._rx.released_through_ns().items()},
                 "counts": self._rx.counts(), "rejected": dict(self._rx.rejected), "end_of_data": self._ended,
-                "command_reports": self._new_reports, "command_reports_total": len(self._reports_seen)}
+                "command_reports": self._new_reports, "command_reports_total": len(self._reports_seen),
+                "frame_security": self._frame_security}
 
     def _publish_reception(self) -> None:
         state = self.reception()

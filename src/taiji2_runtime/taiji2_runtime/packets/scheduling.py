@@ -5,7 +5,9 @@
   instructions, each the release time as an 8-octet CUC field with P-field (onboard time,
   :mod:`.cuc`) followed by the request: a whole torque TC ``TC[130,1]`` (:mod:`.telecommand`, its
   own execution time = the release time). No sub-schedule or group identifiers (mission option).
-* The onboard executor's verification reports, ``TM[1,1]`` acceptance success, ``TM[1,7]``
+* The onboard executor's verification reports, ``TM[1,1]`` acceptance success, ``TM[1,2]`` acceptance
+  failure (a packet that came in an authentic frame but is not a valid TC[11,4]: code
+  :data:`ACCEPTANCE_FAILURE_CODES` of its defect, then 0), ``TM[1,7]``
   completion success (every activity inserted) and ``TM[1,8]`` completion failure (failure notice:
   code :data:`FAILURE_LATE` or :data:`FAILURE_CAPACITY`, 1 octet, then the number of activities
   refused, uint16), are spacepackets ``Service1Tm`` packets of APID :data:`REPORT_APID`, with the
@@ -40,8 +42,8 @@ from taiji2_runtime.packets.telecommand import (
     unpack_telecommand,
 )
 
-__all__ = ["FAILURE_CAPACITY", "FAILURE_LATE", "MAX_ACTIVITIES_PER_TC", "REPORT_APID", "Activity",
-           "VerificationReport", "decode_insert_activities", "decode_report", "encode_insert_activities",
+__all__ = ["ACCEPTANCE_FAILURE_CODES", "FAILURE_CAPACITY", "FAILURE_LATE", "MAX_ACTIVITIES_PER_TC", "REPORT_APID",
+           "Activity", "VerificationReport", "decode_insert_activities", "decode_report", "encode_insert_activities",
            "encode_report"]
 
 SCHEDULING_SERVICE = 11
@@ -50,8 +52,11 @@ INSERT_ACTIVITIES = 4
 REPORT_APID = 0x141
 FAILURE_LATE = 1  # an activity's release time was before its arrival plus the time margin
 FAILURE_CAPACITY = 2  # the onboard schedule was full
-#: instructions per TC[11,4]: 8 + 69 octets each, a packet of at most ~4 kB
-MAX_ACTIVITIES_PER_TC = 50
+#: TM[1,2] failure codes: the PacketError kind of a telecommand refused at acceptance
+ACCEPTANCE_FAILURE_CODES = {"crc_error": 3, "truncated": 4, "unknown_apid": 5, "wrong_length": 6, "bad_time_field": 7}
+#: instructions per TC[11,4]: 8 + 69 octets each, a packet of at most 15 + 12 x 77 = 939 octets, so that one
+#: packet fits one SDLS-secured TC transfer frame (987 octets of frame data, :mod:`.sdls`)
+MAX_ACTIVITIES_PER_TC = 12
 _INSTRUCTION_OCTETS = 8 + TC_PACKET_OCTETS
 
 
@@ -106,8 +111,9 @@ def decode_insert_activities(packet: bytes) -> tuple[PusTc, list[TorqueCommand]]
 
 @dataclass(frozen=True)
 class VerificationReport:
-    """A decoded TM[1,x]: subtype (1 acceptance, 7 completion success, 8 completion failure), the TC's
-    sequence count, the report's onboard time, and for a failure its code and activities refused."""
+    """A decoded TM[1,x]: subtype (1 acceptance, 2 acceptance failure, 7 completion success, 8 completion
+    failure), the TC's sequence count, the report's onboard time, and for a failure its code and activities
+    refused."""
 
     subtype: int
     tc_seq_count: int
@@ -116,20 +122,25 @@ class VerificationReport:
     refused: int = 0
 
 
-def encode_report(subtype: int, tc: PusTc, onboard_ns: int, seq_count: int, failure_code: int = 0,
+def encode_report(subtype: int, tc: PusTc | bytes, onboard_ns: int, seq_count: int, failure_code: int = 0,
                   refused: int = 0) -> bytes:
-    """The TM[1,subtype] (1, 7 or 8) reporting on ``tc`` at onboard time ``onboard_ns``."""
-    if subtype not in (1, 7, 8):
-        raise ValueError(f"verification report subtype {subtype}: 1, 7 or 8")
+    """The TM[1,subtype] (1, 2, 7 or 8) reporting on ``tc`` at onboard time ``onboard_ns``; ``tc`` the PusTc or,
+    for an acceptance failure, the raw packet (its first 4 octets are the request id; zeros if shorter)."""
+    if subtype not in (1, 2, 7, 8):
+        raise ValueError(f"verification report subtype {subtype}: 1, 2, 7 or 8")
     notice = (FailureNotice(PacketFieldEnum.with_byte_size(1, failure_code), struct.pack(">H", refused))
-              if subtype == 8 else None)
-    params = VerificationParams(RequestId.from_sp_header(tc.sp_header), failure_notice=notice)
+              if subtype in (2, 8) else None)
+    if isinstance(tc, PusTc):
+        request = RequestId.from_sp_header(tc.sp_header)
+    else:
+        request = RequestId.unpack(bytes(tc[:4])) if len(tc) >= 4 else RequestId.empty()
+    params = VerificationParams(request, failure_notice=notice)
     tm = Service1Tm(REPORT_APID, subtype, cuc_pack(onboard_ns), params, seq_count=seq_count % SEQ_MODULO)
     return bytes(tm.pack())
 
 
 def decode_report(packet: bytes) -> VerificationReport:
-    """Decode a TM[1,1|7|8] of :func:`encode_report`.
+    """Decode a TM[1,1|2|7|8] of :func:`encode_report`.
 
     Raises
     ------

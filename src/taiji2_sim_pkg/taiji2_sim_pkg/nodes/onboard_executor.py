@@ -1,7 +1,13 @@
 """onboard_executor (onboard): the time-based schedule of ECSS PUS service 11 and the maneuver it flies.
 
-Takes the telecommands the uplink delivers (``/onboard/link/tc``; each packet with its onboard arrival
-time): each ``TC[11,4]`` inserts its activities into :class:`taiji2_sim_pkg.core.onboard_schedule.OnboardSchedule`
+Takes the TC transfer frames the uplink delivers (``/onboard/link/tc``; each frame with its onboard
+arrival time) and authenticates each before anything else reads it (SDLS,
+:class:`taiji2_runtime.packets.sdls.FrameVerifier` with the onboard key table ``key_file``): a refused
+frame (truncated, oversized, bad FECF or header, no or unknown or revoked SPI, bad MAC, replayed or
+out-of-window sequence number) is counted per reason on ``/diagnostics`` and in a frame security
+report (TM[3,25]) in telemetry, and nothing of it is read further. The telecommand packet of an
+authentic frame that is not a valid TC[11,4] is refused with ``TM[1,2]`` (its defect's code). Each
+valid ``TC[11,4]`` inserts its activities into :class:`taiji2_sim_pkg.core.onboard_schedule.OnboardSchedule`
 at its arrival, which refuses an activity due before arrival + time margin (late: never executed late)
 or beyond the capacity; acceptance ``TM[1,1]`` and completion ``TM[1,7]`` / ``TM[1,8]`` (refused
 activities counted, code late or capacity) are reported in telemetry (``/onboard/link/tm_reports``,
@@ -24,7 +30,22 @@ from taiji2_runtime import link_topics as lt
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.packetize import PacketError
-from taiji2_runtime.packets.scheduling import FAILURE_CAPACITY, FAILURE_LATE, decode_insert_activities, encode_report
+from taiji2_runtime.packets.scheduling import (
+    ACCEPTANCE_FAILURE_CODES,
+    FAILURE_CAPACITY,
+    FAILURE_LATE,
+    decode_insert_activities,
+    encode_report,
+)
+from taiji2_runtime.packets.sdls import (
+    DEFAULT_REPLAY_WINDOW,
+    REFUSAL_REASONS,
+    FrameRefused,
+    FrameVerifier,
+    encode_frame_security_report,
+)
+from taiji2_runtime.packets.sdls_keys import KeyFileError, KeyTable, key_file_warning, load_key_file
+from taiji2_runtime.packets.tc_frame import MAX_FRAME_OCTETS, FrameError, split_frames
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.onboard_schedule import OnboardSchedule
 
@@ -46,6 +67,12 @@ class OnboardExecutor(rclpy.node.Node):
         self._lookahead_ns = round(_NS * dp("lookahead_s", 10.0, read_only(
             "publish time-tagged commands this far ahead of the clock [s]")).value)
         self._period_ns = round(_NS / rate_hz)
+        key_file = dp("key_file", "", read_only(
+            "the onboard SDLS key table (a key file, docs/security.md); empty: no keys, every frame refused")).value
+        window = dp("replay_window", DEFAULT_REPLAY_WINDOW, read_only(
+            "anti-replay window: a frame's sequence number at most this far above the last accepted")).value
+        max_frame = dp("max_frame_octets", MAX_FRAME_OCTETS, read_only("longest TC frame accepted [octets]")).value
+        self.verifier = FrameVerifier(self._key_table(key_file), window=window, max_frame_octets=max_frame)
         self.schedule = OnboardSchedule(capacity, margin)
         self._horizon_ns = -1  # the uplink is complete through this onboard time
         self._next_ns = 0
@@ -65,32 +92,67 @@ class OnboardExecutor(rclpy.node.Node):
         self._first_timer = self.create_timer(0.05, self._first_tick, clock=steady)
         self.create_timer(1.0, self._publish_diagnostics, clock=steady)
 
+    def _key_table(self, key_file: str) -> KeyTable:
+        if not key_file:
+            self.get_logger().error("no key_file: every telecommand frame will be refused (unknown SPI)")
+            return KeyTable()
+        try:
+            table = load_key_file(key_file)
+        except KeyFileError as exc:
+            self.get_logger().error(f"{exc}: every telecommand frame will be refused")
+            return KeyTable()
+        warning = key_file_warning(key_file)
+        if warning:
+            self.get_logger().warn(warning)
+        return table
+
     def _on_telecommands(self, msg: Any) -> None:
         try:
-            packets = lt.split(msg)
-        except ValueError as exc:
-            self.get_logger().error(f"telecommand burst refused: {exc}")
+            frames = split_frames(bytes(msg.data))
+            if len(frames) != len(msg.times_ns):
+                raise FrameError("truncated", f"{len(frames)} frames but {len(msg.times_ns)} times")
+        except FrameError as exc:  # nothing of a burst that does not divide into its frames is read
+            self.verifier.count_refused(exc.kind)
+            self.get_logger().warn(f"telecommand burst refused: {exc}", throttle_duration_sec=10.0)
+            now_ns = self.get_clock().now().nanoseconds
+            self._report(encode_frame_security_report(self.verifier.report(), now_ns, self._report_seq), now_ns)
             return
-        for packet, arrival_ns in zip(packets, msg.times_ns, strict=True):
-            try:
-                tc, commands = decode_insert_activities(packet)
-            except PacketError as exc:
-                self._invalid += 1
-                self.get_logger().warn(f"telecommand refused: {exc}")
-                continue
+        refused_at = -1
+        for frame, arrival_ns in zip(frames, msg.times_ns, strict=True):
             arrival_ns = int(arrival_ns)
-            late, full = self.schedule.insert(arrival_ns / _NS, [(c.execute_onboard_ns / _NS, tuple(c.torque_n_m))
-                                                                 for c in commands])
-            self._tables += 1
-            self._report(encode_report(1, tc, arrival_ns, self._report_seq), arrival_ns)
-            if late or full:
-                code = FAILURE_LATE if late else FAILURE_CAPACITY
-                self._report(encode_report(8, tc, arrival_ns, self._report_seq, code, late + full), arrival_ns)
-                self.get_logger().warn(f"TC[11,4] #{tc.seq_count} arriving at {arrival_ns / _NS:.1f} s: {late} "
-                                       f"activities refused as late, {full} for capacity (never executed)")
-            else:
-                self._report(encode_report(7, tc, arrival_ns, self._report_seq), arrival_ns)
+            try:
+                packet = self.verifier.verify(frame)
+            except FrameRefused as exc:
+                refused_at = max(refused_at, arrival_ns)
+                self.get_logger().warn(f"telecommand frame refused: {exc}", throttle_duration_sec=10.0)
+                continue
+            self._on_packet(packet, arrival_ns)
+        if refused_at >= 0:
+            self._report(encode_frame_security_report(self.verifier.report(), refused_at, self._report_seq),
+                         refused_at)
         self._horizon_ns = max(self._horizon_ns, lt.stamp_ns(msg.header))
+
+    def _on_packet(self, packet: bytes, arrival_ns: int) -> None:
+        """One authenticated telecommand packet, arrived onboard at ``arrival_ns``."""
+        try:
+            tc, commands = decode_insert_activities(packet)
+        except PacketError as exc:
+            self._invalid += 1
+            self._report(encode_report(2, packet, arrival_ns, self._report_seq,
+                                       ACCEPTANCE_FAILURE_CODES.get(exc.kind, 0)), arrival_ns)
+            self.get_logger().warn(f"telecommand refused at acceptance (TM[1,2]): {exc}")
+            return
+        late, full = self.schedule.insert(arrival_ns / _NS, [(c.execute_onboard_ns / _NS, tuple(c.torque_n_m))
+                                                             for c in commands])
+        self._tables += 1
+        self._report(encode_report(1, tc, arrival_ns, self._report_seq), arrival_ns)
+        if late or full:
+            code = FAILURE_LATE if late else FAILURE_CAPACITY
+            self._report(encode_report(8, tc, arrival_ns, self._report_seq, code, late + full), arrival_ns)
+            self.get_logger().warn(f"TC[11,4] #{tc.seq_count} arriving at {arrival_ns / _NS:.1f} s: {late} "
+                                   f"activities refused as late, {full} for capacity (never executed)")
+        else:
+            self._report(encode_report(7, tc, arrival_ns, self._report_seq), arrival_ns)
 
     def _report(self, packet: bytes, t_ns: int) -> None:
         self._reports.append((t_ns, packet))
@@ -126,13 +188,25 @@ class OnboardExecutor(rclpy.node.Node):
         d = messages.diagnostic_msgs
         s = self.schedule
         refused = s.refused_late + s.refused_full
+        sec = self.verifier
+        frames_refused = {r: sec.refused[r] for r in REFUSAL_REASONS if sec.refused[r]}
         status = d.DiagnosticStatus(name="onboard_executor", hardware_id="taiji2_onboard")
-        status.level = d.DiagnosticStatus.WARN if refused or self._invalid else d.DiagnosticStatus.OK
-        status.message = (f"{s.refused_late} activities refused as late, {s.refused_full} for capacity"
-                          if refused else "nominal")
+        status.level = (d.DiagnosticStatus.WARN if refused or self._invalid or frames_refused
+                        else d.DiagnosticStatus.OK)
+        problems = []
+        if frames_refused:
+            problems.append(f"telecommand frames refused: {sum(frames_refused.values())} ("
+                            + ", ".join(f"{k} {n}" for k, n in frames_refused.items()) + ")")
+        if self._invalid:
+            problems.append(f"{self._invalid} telecommands refused at acceptance (TM[1,2])")
+        if refused:
+            problems.append(f"{s.refused_late} activities refused as late, {s.refused_full} for capacity")
+        status.message = "; ".join(problems) or "nominal"
         values = {"tables": self._tables, "inserted": s.inserted, "refused_late": s.refused_late,
                   "refused_full": s.refused_full, "invalid_telecommands": self._invalid,
-                  "uplink_complete_through_s": self._horizon_ns / _NS}
+                  "uplink_complete_through_s": self._horizon_ns / _NS, "frames_accepted": sec.accepted,
+                  "frames_refused": {r: sec.refused[r] for r in REFUSAL_REASONS},
+                  "last_spi": sec.report(clear_flags=False).last_spi}
         status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in values.items()]
         self._diag_pub.publish(d.DiagnosticArray(status=[status]))
 

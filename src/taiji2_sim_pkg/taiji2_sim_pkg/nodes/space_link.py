@@ -8,10 +8,10 @@ Thin ROS glue around :class:`taiji2_sim_pkg.core.link.Downlink` and :class:`~tai
   the transmitted-through time, complete through stamp + light time). The model runs on the data's
   own time, so accelerated runs are exact and a seed gives the same link whatever the DDS timing.
   At ``end_of_data`` it plays back what is still stored over the following passes and ends.
-* Uplink: telecommand bursts from the ground (``/ground/link/tc``, each stamped with the ground time
-  from which it may be sent) go out in the next pass at the uplink rate and reach
-  ``/onboard/link/tc`` one light time later (each packet with its onboard arrival time); lost ones are
-  counted and named.
+* Uplink: telecommand bursts from the ground (``/ground/link/tc``: SDLS-secured TC transfer frames, each
+  stamped with the ground time from which it may be sent) go out in the next pass at the uplink rate and
+  reach ``/onboard/link/tc`` one light time later (each frame with its onboard arrival time); lost ones are
+  counted and named. The link carries frames as they are: it neither checks nor changes them.
 * ``/diagnostics`` names each link fault (a missed pass, the onboard memory overwriting, a lost
   uplink) with counts; ``/taiji2/sim/link_report`` (latched JSON, evaluation only) is the link's own
   account per stream. Parameters: ``config/space_link.yaml``.
@@ -119,7 +119,7 @@ class SpaceLink(rclpy.node.Node):
     # -- uplink ----------------------------------------------------------------------------------------
     def _on_telecommands(self, msg: Any) -> None:
         try:
-            packets = lt.split(msg)
+            packets = lt.split_tc_frames(msg)
         except ValueError as exc:
             self.get_logger().error(f"telecommand burst refused: {exc}", throttle_duration_sec=10.0)
             return
@@ -130,9 +130,9 @@ class SpaceLink(rclpy.node.Node):
                 reason = "no pass left to send it in" if d is None else d.reason
                 self._uplink_lost.append({"ready_s": ready_ns / _NS, "pass": None if d is None else d.contact,
                                           "reason": reason})
-                self._faults["uplink lost"] = (f"{len(self._uplink_lost)} telecommand packet(s) lost on the "
+                self._faults["uplink lost"] = (f"{len(self._uplink_lost)} telecommand frame(s) lost on the "
                                                f"uplink (last: {reason})")
-                self.get_logger().warn(f"telecommand packet ready at {ready_ns / _NS:.1f} s lost on the uplink: "
+                self.get_logger().warn(f"telecommand frame ready at {ready_ns / _NS:.1f} s lost on the uplink: "
                                        f"{reason}")
                 continue
             arrived.append(d.packet)
