@@ -16,7 +16,10 @@ along the rotation between its neighbours (over 5 s at most ``|omega_dot| T^2 / 
 GRS from the other GRS where it has the sample, else from the command's step and its neighbours. A
 bridged sample carries no noise of its own, so the diagnosis's noise estimates are slightly low where
 many are bridged (its report gives ``inputs.bridged``). A longer gap ends a segment; the diagnosis
-uses the longest segment and counts the valid samples outside it as ``outside_run``.
+uses the longest segment and counts the valid samples outside it as ``outside_run``. The epochs that
+hold an estimate (a bridged sample in any stream, or a command lost at a change and placed within a
+GRS gap: :func:`_locate_lost_changes`) are marked (``DiagnosisInput.filled``): the location scan treats
+them as missing (:mod:`.locations`); the fits use them.
 
 Reasons: those of the epoch rule (``duplicate_stamp``, ``off_grid_stamp``, ``before_start``,
 ``duplicate_epoch``; a bulk read sorts each stream, so no ``out_of_order_stamp``), ``nan_or_inf``,
