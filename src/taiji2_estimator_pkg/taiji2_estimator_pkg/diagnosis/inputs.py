@@ -370,14 +370,16 @@ def _locate_lost_changes(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, 
     """Commands lost where they changed: the change put at the epoch the GRS show, else its epochs marked unknown.
 
     The held command (:func:`commands_on_grid`) changes at the first row received with the new value. When the
-    rows before it were lost (an interval longer than the stream's cadence, the median interval), the change
+    rows before it were lost (a stream with a row per epoch, as recorded, and an interval longer than that:
+    rows only at changes and at 1 Hz, the contract's minimum, leave a lost change no trace), the change
     lies anywhere in that interval, and holding the old value to the next row received puts the maneuver's
     step late (on the deep_space link: 100 sigma of the torque channel per wrong epoch). The GRS show the
-    step: of the epochs it can lie at, the one whose GRS difference (both GRS received on it and the epoch
-    before) is closer to the command's step response (:func:`_command_response`) than to no step, the best,
-    takes it; ``tau`` is corrected in place. Where no epoch is (the step hidden in the GRS's own gap), the
-    epochs in doubt are returned (True) as unknown: estimates, like bridged samples; the change is then put in
-    the middle of the GRS's gap, so that the GRS bridged across it (:func:`_bridge`, which follows the
+    step: unless the GRS difference at the new row's own epoch shows it (then nothing changes), of the epochs
+    it can lie at, the one whose GRS difference (both GRS received on it and the epoch before) is closer to
+    the command's step response (:func:`_command_response`) than to no step, the best, takes it; ``tau`` is
+    corrected in place. Where no epoch is (the step hidden in the GRS's own gap), the epochs in doubt are
+    returned (True) as unknown: estimates, like bridged samples; the change is then put in the middle of the
+    GRS's gap, so that the GRS bridged across it (:func:`_bridge`, which follows the
     command's step) step with it and the channels stay consistent there (the 3-h deep_space run: five such
     changes; held to the next row instead, each read 20 to 100 sigma per epoch in the torque channel and a
     GRS time offset in the fits).
@@ -393,6 +395,8 @@ def _locate_lost_changes(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, 
     dt = 1.0 / fs
     interval = np.diff(stamps)
     cadence = max(float(np.median(interval)), dt)
+    if cadence > dt * (1.0 + _GRID_TOL):
+        return unknown  # rows at changes and at 1 Hz (the contract's minimum): a lost change leaves no trace
     changed = np.any(np.diff(torque, axis=0) != 0.0, axis=1)
     doubtful = np.flatnonzero(changed & (interval > cadence + _GRID_TOL * dt)) + 1  # rows whose change may be early
     if not doubtful.size:
@@ -415,6 +419,8 @@ def _locate_lost_changes(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, 
         step = (torque[i] - torque[i - 1]) @ response
         candidates = np.arange(first + 1, new + 1)  # the change takes effect at one of these epochs
         score = np.where(pair[candidates], 2.0 * d_grs[candidates] @ step - step @ step, -np.inf)
+        if score[-1] > 0.0:
+            continue  # the GRS step at the new row's own epoch: held as received
         best = int(np.argmax(score))
         if np.isfinite(score[best]) and score[best] > 0.0:
             tau[candidates[best]:new + 1] = torque[i]
