@@ -27,7 +27,7 @@ import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
-from taiji2_estimator_pkg.diagnosis.locations import Location, LocationGrid
+from taiji2_estimator_pkg.diagnosis.locations import Location, LocationGrid, masked_views
 from taiji2_estimator_pkg.diagnosis.record import Record
 
 __all__ = ["Cell", "accepted_report_data", "excess", "how_far", "signature_cells"]
@@ -220,10 +220,11 @@ def how_far(record: Record, top: Sequence[Location], accepted: Sequence[Candidat
         theta, _, _ = record.fit(names)
         residual = np.fft.rfft(record.residual_time(names, theta), axis=0)[1:bins_all.shape[0] + 1]
         residual /= math.sqrt(record.n)
-        views = dict(zip(("marginal", "conditional"), record.spectrum.normalised(
-            residual, bins_all, kappa * template_all if kappa > 0 else None), strict=True))
+        views = masked_views(dict(zip(("marginal", "conditional"), record.spectrum.normalised(
+            residual, bins_all, kappa * template_all if kappa > 0 else None), strict=True)), record.keep)
+        share = 1.0 if record.keep is None else float(np.mean(record.keep))  # as the scan (.locations)
         for row, (c, view, mask) in zip(rows, masks, strict=True):
-            gap = float(np.mean(np.abs(views[view][mask, c]) ** 2))
+            gap = float(np.mean(np.abs(views[view][mask, c]) ** 2)) / share
             before = row["gap_nominal"]
             row["after"].append({"effect": candidate.key, "gap": gap,
                                  "fraction_explained": (before - gap) / (before - 1.0) if before > 1.0 else None})

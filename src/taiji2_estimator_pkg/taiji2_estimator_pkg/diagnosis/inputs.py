@@ -16,7 +16,10 @@ along the rotation between its neighbours (over 5 s at most ``|omega_dot| T^2 / 
 GRS from the other GRS where it has the sample, else from the command's step and its neighbours. A
 bridged sample carries no noise of its own, so the diagnosis's noise estimates are slightly low where
 many are bridged (its report gives ``inputs.bridged``). A longer gap ends a segment; the diagnosis
-uses the longest segment and counts the valid samples outside it as ``outside_run``.
+uses the longest segment and counts the valid samples outside it as ``outside_run``. The epochs that
+hold an estimate (a bridged sample in any stream, or a command lost at a change and placed within a
+GRS gap: :func:`_locate_lost_changes`) are marked (``DiagnosisInput.filled``): the location scan treats
+them as missing (:mod:`.locations`); the fits use them.
 
 Reasons: those of the epoch rule (``duplicate_stamp``, ``off_grid_stamp``, ``before_start``,
 ``duplicate_epoch``; a bulk read sorts each stream, so no ``out_of_order_stamp``), ``nan_or_inf``,
@@ -74,6 +77,10 @@ class DiagnosisInput:
         convention the diagnosis adds to its nominal model.
     bridged : dict of str to int
         Per stream: samples interpolated across gaps of at most :data:`MAX_BRIDGE_SAMPLES`.
+    filled : numpy.ndarray or None
+        (n,) True on the epochs that hold an estimate, not a received value, in some stream: a bridged
+        sample, or a command lost where it changed (:func:`_locate_lost_changes`). The fits use them
+        (one contiguous grid); the location scan treats them as missing (:mod:`.locations`). None: none.
     """
 
     t_s: np.ndarray
@@ -84,6 +91,7 @@ class DiagnosisInput:
     rejected: dict[str, int] = field(default_factory=dict)
     stamp_phase_s: dict[str, float] = field(default_factory=lambda: {"grs": 0.0, "command": 0.0})
     bridged: dict[str, int] = field(default_factory=dict)
+    filled: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -105,7 +113,8 @@ class DiagnosisInput:
         window = slice(start, stop)
         return DiagnosisInput(self.t_s[window], self.st_quat_xyzw[window], self.voltages_v[window],
                               self.torque_cmd_n_m[window], self.sample_rate_hz, dict(self.rejected),
-                              dict(self.stamp_phase_s), dict(self.bridged))
+                              dict(self.stamp_phase_s), dict(self.bridged),
+                              None if self.filled is None else self.filled[window].copy())
 
 
 def _array(name: str, value: ArrayLike, shape_tail: tuple[int, ...]) -> np.ndarray:
@@ -264,8 +273,10 @@ def _bridge_all(values: dict[str, np.ndarray], present: dict[str, np.ndarray], t
 
 
 def _finish(grid: np.ndarray, values: dict[str, np.ndarray], present: dict[str, np.ndarray], tau: np.ndarray,
-            fs: float, counts: Counter, bridged: dict[str, int], stamp_phase_s: dict[str, float]) -> DiagnosisInput:
-    """The longest segment of epochs holding every stream (after bridging); the rest counted."""
+            fs: float, counts: Counter, bridged: dict[str, int], stamp_phase_s: dict[str, float],
+            estimated: np.ndarray) -> DiagnosisInput:
+    """The longest segment of epochs holding every stream (after bridging); the rest counted. ``estimated``: (n,)
+    epochs where some stream holds an estimate (bridged, or the command unknown), ``DiagnosisInput.filled``."""
     valid = present["star_tracker"] & present["grs1"] & present["grs2"]
     partial = (present["star_tracker"] | present["grs1"] | present["grs2"]) & ~valid
     counts["unmatched"] += int(np.count_nonzero(partial))
@@ -281,9 +292,10 @@ def _finish(grid: np.ndarray, values: dict[str, np.ndarray], present: dict[str, 
         sign = np.concatenate(([1.0], np.where(np.cumsum(flips) % 2 == 1, -1.0, 1.0)))
         q *= sign[:, None]
     voltages = np.stack((values["grs1"], values["grs2"]), axis=1)[start:stop].copy()
+    filled = np.asarray(estimated, dtype=bool)[start:stop].copy()
     return DiagnosisInput(grid[start:stop].copy(), q, voltages, np.asarray(tau)[start:stop].copy(), fs,
                           {key: int(value) for key, value in counts.items() if value}, dict(stamp_phase_s),
-                          dict(bridged))
+                          dict(bridged), filled if np.any(filled) else None)
 
 
 def _valid_rows(name: str, t: np.ndarray, x: np.ndarray, counts: Counter) -> np.ndarray:
@@ -348,8 +360,76 @@ def prepare_input(t_s: ArrayLike, st_quat_xyzw: ArrayLike, voltages_v: ArrayLike
     good = np.isfinite(t) & np.all(np.isfinite(tau), axis=1)
     counts["nan_or_inf"] += int(np.count_nonzero(~good))
     held = commands_on_grid(t[good] - 1.0 / fs, tau[good], grid, fs)
+    received = present["star_tracker"] & present["grs1"] & present["grs2"]
     bridged = _bridge_all(values, present, held)
-    return _finish(grid, values, present, held, fs, counts, bridged, {"grs": phase_grs, "command": 0.0})
+    return _finish(grid, values, present, held, fs, counts, bridged, {"grs": phase_grs, "command": 0.0}, ~received)
+
+
+def _locate_lost_changes(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, grid: np.ndarray, fs: float,
+                         tau: np.ndarray, values: dict[str, np.ndarray], present: dict[str, np.ndarray]) -> np.ndarray:
+    """Commands lost where they changed: the change put at the epoch the GRS show, else its epochs marked unknown.
+
+    The held command (:func:`commands_on_grid`) changes at the first row received with the new value. When the
+    rows before it were lost (a stream with a row per epoch, as recorded, and an interval longer than that:
+    rows only at changes and at 1 Hz, the contract's minimum, leave a lost change no trace), the change
+    lies anywhere in that interval, and holding the old value to the next row received puts the maneuver's
+    step late (on the deep_space link: 100 sigma of the torque channel per wrong epoch). The GRS show the
+    step: unless the GRS difference at the new row's own epoch shows it (then nothing changes), of the epochs
+    it can lie at, the one whose GRS difference (both GRS received on it and the epoch before) is closer to
+    the command's step response (:func:`_command_response`) than to no step, the best, takes it; ``tau`` is
+    corrected in place. Where no epoch is (the step hidden in the GRS's own gap), the epochs in doubt are
+    returned (True) as unknown: estimates, like bridged samples; the change is then put in the middle of the
+    GRS's gap, so that the GRS bridged across it (:func:`_bridge`, which follows the
+    command's step) step with it and the channels stay consistent there (the 3-h deep_space run: five such
+    changes; held to the next row instead, each read 20 to 100 sigma per epoch in the torque channel and a
+    GRS time offset in the fits).
+    """
+    unknown = np.zeros(grid.shape[0], dtype=bool)
+    stamps = np.asarray(command_t_s, dtype=np.float64)
+    torque = np.asarray(command_torque_n_m, dtype=np.float64).reshape(-1, 3)
+    good = np.isfinite(stamps) & np.all(np.isfinite(torque), axis=1)
+    order = np.argsort(stamps[good], kind="stable")
+    stamps, torque = stamps[good][order], torque[good][order]
+    if stamps.shape[0] < 3 or grid.shape[0] < 3:
+        return unknown
+    dt = 1.0 / fs
+    interval = np.diff(stamps)
+    cadence = max(float(np.median(interval)), dt)
+    if cadence > dt * (1.0 + _GRID_TOL):
+        return unknown  # rows at changes and at 1 Hz (the contract's minimum): a lost change leaves no trace
+    changed = np.any(np.diff(torque, axis=0) != 0.0, axis=1)
+    doubtful = np.flatnonzero(changed & (interval > cadence + _GRID_TOL * dt)) + 1  # rows whose change may be early
+    if not doubtful.size:
+        return unknown
+    grs = np.concatenate((values["grs1"], values["grs2"]), axis=1)
+    both = present["grs1"] & present["grs2"]
+    response = _command_response(grs, both, tau)
+    pair = np.concatenate(([False], both[1:] & both[:-1]))
+    d_grs = np.concatenate((np.zeros((1, grs.shape[1])), np.diff(grs, axis=0)))
+    # a row is in force from the first epoch whose step starts at or after its stamp (commands_on_grid)
+    reach = grid - dt + _GRID_TOL * dt
+    for i in doubtful:
+        first = int(np.searchsorted(reach, stamps[i - 1], side="left"))  # the old value's epoch, received
+        new = int(np.searchsorted(reach, stamps[i], side="left"))  # the new value's first epoch, received
+        if new >= grid.shape[0]:
+            unknown[first + 1:] = True
+            continue
+        if new <= first + 1:
+            continue  # no epoch in doubt
+        step = (torque[i] - torque[i - 1]) @ response
+        candidates = np.arange(first + 1, new + 1)  # the change takes effect at one of these epochs
+        score = np.where(pair[candidates], 2.0 * d_grs[candidates] @ step - step @ step, -np.inf)
+        if score[-1] > 0.0:
+            continue  # the GRS step at the new row's own epoch: held as received
+        best = int(np.argmax(score))
+        if np.isfinite(score[best]) and score[best] > 0.0:
+            tau[candidates[best]:new + 1] = torque[i]
+            continue
+        unknown[first + 1:new] = True
+        hidden = candidates[~pair[candidates]]
+        if hidden.size:  # in the GRS's own gap: in its middle, so that the GRS bridged there step with it
+            tau[hidden[hidden.size // 2]:new + 1] = torque[i]
+    return unknown
 
 
 def commands_on_grid(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, sample_t_s: ArrayLike,
@@ -444,5 +524,8 @@ def align_streams(st_t_s: ArrayLike, st_quat_xyzw: ArrayLike, grs1_t_s: ArrayLik
     command_t = np.asarray(command_t_s, dtype=np.float64)
     phase_c = _phase_steps(command_t[np.isfinite(command_t)], float(grid[0]), dt)
     tau = commands_on_grid(command_t - phase_c * dt, command_torque_n_m, grid, fs)
+    received = present["star_tracker"] & present["grs1"] & present["grs2"]
+    unknown = _locate_lost_changes(command_t - phase_c * dt, command_torque_n_m, grid, fs, tau, values, present)
     bridged = _bridge_all(values, present, tau)
-    return _finish(grid, values, present, tau, fs, counts, bridged, {"grs": phase_grs, "command": phase_c * dt})
+    return _finish(grid, values, present, tau, fs, counts, bridged, {"grs": phase_grs, "command": phase_c * dt},
+                   ~received | unknown)

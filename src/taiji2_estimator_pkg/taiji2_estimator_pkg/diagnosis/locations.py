@@ -15,6 +15,18 @@ segment:
 
 Significance = ``-log10 p`` of the upper tail (power excess). A location is significant when its
 p-value is below ``alpha / (number of tested locations)`` (Bonferroni).
+
+Missing samples. The epochs that hold an estimate (bridged across a lost sample, or a command lost where
+it changed: ``DiagnosisInput.filled``) are not data: their residual carries no noise of its own, and the
+relations between channels that the conditional view relies on (the GRS's common noise seen by the star
+tracker and the torque channel) do not hold there, so a burst of a few such epochs reads as a strong local
+gap. The scan treats them as missing (:func:`scan_keep`, :func:`masked_views`): the whitened series of
+each view is set to zero on those epochs and the epochs next to them (the channels' stencil: the
+whitened residual of a sample's error lies within one epoch of it, measured on the type1 spectra; the
+AR(1) prewhitening of ``lin_common`` leaves 14 % of it further), and each location's expectation and
+degrees of freedom count the L epochs kept only: a whole-run ``R = mean_k |Y'_k|^2 / (L / n)`` with
+``2 K L / n`` degrees of freedom (conservative: the mask correlates neighbouring bins, which reduces the
+effective degrees of freedom by at most that factor), a segment's with its own L.
 """
 
 from __future__ import annotations
@@ -28,9 +40,53 @@ from scipy.special import gammaincc
 
 from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
 
-__all__ = ["Location", "LocationGrid", "log10_tail", "scan_locations", "time_window"]
+__all__ = ["Location", "LocationGrid", "log10_tail", "masked_views", "scan_keep", "scan_locations", "time_window"]
 
 _MIN_DOF = 4.0  # fewest degrees of freedom of a tested location (a Gamma tail is meaningless below)
+#: epochs before and after an estimated one left out of the scan (the channels' stencil after whitening)
+MASK_BEFORE, MASK_AFTER = 1, 2
+
+
+def scan_keep(filled: np.ndarray | None, n: int) -> np.ndarray | None:
+    """(n,) float, 1 on the epochs the location scan uses, 0 on the estimated ones and their neighbours
+    (``MASK_BEFORE`` before, ``MASK_AFTER`` after); None when every epoch holds received data."""
+    if filled is None or not np.any(filled):
+        return None
+    estimated = np.asarray(filled, dtype=bool)
+    dropped = estimated.copy()
+    for shift in range(1, MASK_AFTER + 1):
+        dropped[shift:] |= estimated[:-shift]
+    for shift in range(1, MASK_BEFORE + 1):
+        dropped[:-shift] |= estimated[shift:]
+    return (~dropped).astype(np.float64)
+
+
+def masked_views(views: dict[str, np.ndarray], keep: np.ndarray | None) -> dict[str, np.ndarray]:
+    """The views with the epochs left out of the scan set to zero in their whitened series.
+
+    Parameters
+    ----------
+    views : dict of str to numpy.ndarray
+        (K, c) unit-variance residual DFTs (bins 1..K, K = (n-1)//2).
+    keep : numpy.ndarray or None
+        (n,) :func:`scan_keep`; None returns ``views`` unchanged.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        (K, c) DFTs of the masked whitened series (expectation ``L / n`` per bin, L the epochs kept).
+    """
+    if keep is None:
+        return views
+    n = keep.shape[0]
+    out = {}
+    for name, view in views.items():
+        spectrum = np.zeros((n // 2 + 1, *view.shape[1:]), dtype=np.complex128)
+        spectrum[1:1 + view.shape[0]] = view
+        series = np.fft.irfft(spectrum, n=n, axis=0) * np.sqrt(n)
+        series *= keep.reshape(-1, *([1] * (series.ndim - 1)))
+        out[name] = np.fft.rfft(series, axis=0)[1:1 + view.shape[0]] / np.sqrt(n)
+    return out
 
 
 def log10_tail(shape: np.ndarray | float, value: np.ndarray | float) -> np.ndarray:
@@ -170,7 +226,8 @@ class LocationGrid:
 
 
 def scan_locations(views: dict[str, np.ndarray], grid: LocationGrid, t_s: np.ndarray, segments: int = 3,
-                   alpha: float = 0.01, channels: Sequence[int] | None = None) -> tuple[list[Location], int, float]:
+                   alpha: float = 0.01, channels: Sequence[int] | None = None, keep: np.ndarray | None = None
+                   ) -> tuple[list[Location], int, float]:
     """Test every location of a residual.
 
     Parameters
@@ -188,6 +245,9 @@ def scan_locations(views: dict[str, np.ndarray], grid: LocationGrid, t_s: np.nda
         Family-wise level of the Bonferroni threshold.
     channels : sequence of int, optional
         Channels to scan (default all).
+    keep : numpy.ndarray, optional
+        (n,) epochs used (:func:`scan_keep`), the views already masked (:func:`masked_views`): each
+        location's expectation and degrees of freedom count the kept epochs only. Default: all.
 
     Returns
     -------
@@ -202,6 +262,9 @@ def scan_locations(views: dict[str, np.ndarray], grid: LocationGrid, t_s: np.nda
     names = ("early", "middle", "late") if segments == 3 else tuple(f"part{i + 1}" for i in range(segments))
     bounds = np.linspace(0, n, segments + 1).astype(int) if segments else np.array([0, n])
     chosen = range(len(CHANNELS)) if channels is None else channels
+    kept = np.ones(n) if keep is None else np.asarray(keep, dtype=np.float64)
+    share = float(np.sum(kept)) / n  # L / n
+    kept_in = np.concatenate(([0.0], np.cumsum(kept)))
     records = []
     cells = grid.cells()
     for view, normalised_all in views.items():
@@ -209,9 +272,10 @@ def scan_locations(views: dict[str, np.ndarray], grid: LocationGrid, t_s: np.nda
         for c in chosen:
             for band, kind, mask in cells:
                 count = int(np.count_nonzero(mask))
-                ratio = float(np.mean(power[mask, c]))
+                shape = count * share  # half the degrees of freedom
+                ratio = float(np.mean(power[mask, c])) / share if share > 0 else 0.0
                 records.append((CHANNELS[c], view, band, kind, (float(t_s[0]), float(t_s[-1])), "all", ratio,
-                                2.0 * count, float(log10_tail(count, count * ratio))))
+                                2.0 * shape, float(log10_tail(shape, shape * ratio))))
                 if not segments:
                     continue
                 spectrum = np.zeros(n // 2 + 1, dtype=np.complex128)
@@ -219,10 +283,11 @@ def scan_locations(views: dict[str, np.ndarray], grid: LocationGrid, t_s: np.nda
                 series = np.fft.irfft(spectrum, n=n) * np.sqrt(n)
                 expected = 2.0 * count / n  # E[x_t^2] for unit-variance complex bins
                 for name, start, stop in zip(names, bounds[:-1], bounds[1:], strict=True):
-                    dof = 2.0 * count * (stop - start) / n
+                    used = kept_in[stop] - kept_in[start]
+                    dof = 2.0 * count * used / n
                     if dof < _MIN_DOF:
                         continue
-                    ratio_seg = float(np.mean(series[start:stop] ** 2) / expected)
+                    ratio_seg = float(np.sum(series[start:stop] ** 2) / (expected * used))
                     records.append((CHANNELS[c], view, band, kind, (float(t_s[start]), float(t_s[stop - 1])), name,
                                     ratio_seg, dof, float(log10_tail(0.5 * dof, 0.5 * dof * ratio_seg))))
     n_tests = len(records)

@@ -23,6 +23,7 @@ from taiji2_estimator_pkg.diagnosis.channels import (
 )
 from taiji2_estimator_pkg.diagnosis.dynamics import ResponseFit, fit_response
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
+from taiji2_estimator_pkg.diagnosis.locations import scan_keep
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 from taiji2_estimator_pkg.diagnosis.spectral import Design, NoiseSpectrum, Whitener, dft
 
@@ -98,6 +99,8 @@ class Record:
         self.readouts = readouts_from_input(inp, model)
         self.lin: Linearization = linearize(self.readouts, model, g_angular, com_offset_m)
         self.n = inp.n
+        #: (n,) epochs the location scan uses (estimated ones and their neighbours left out), None: all
+        self.keep = scan_keep(inp.filled, inp.n)
         self.k_max = _k_max(self.n, model.sample_rate_hz, settings.f_max_hz)
         self.bins = np.arange(1, self.k_max + 1)
         self.spectrum = NoiseSpectrum(model, com_offset_m, self.n)

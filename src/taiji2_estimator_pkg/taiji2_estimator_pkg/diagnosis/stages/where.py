@@ -12,7 +12,13 @@ import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
-from taiji2_estimator_pkg.diagnosis.locations import Location, LocationGrid, scan_locations, time_window
+from taiji2_estimator_pkg.diagnosis.locations import (
+    Location,
+    LocationGrid,
+    masked_views,
+    scan_locations,
+    time_window,
+)
 from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
 from taiji2_estimator_pkg.diagnosis.record import Record
 from taiji2_estimator_pkg.diagnosis.spectral import dft
@@ -80,12 +86,15 @@ def scan_grid(full: Record, options: DiagnosisOptions) -> ScanGrid:
 def scan(full: Record, grid: ScanGrid, t_s: np.ndarray, names: Sequence[str], theta: np.ndarray, kappa: float,
          options: DiagnosisOptions) -> Scan:
     """Scan the residual of the fit ``(names, theta)`` (noise model plus ``kappa`` x the star-tracker
-    template) for significant locations; the first significant ones get their time window."""
+    template) for significant locations; the first significant ones get their time window. The epochs
+    that hold estimates are left out (``full.keep``, :func:`.locations.masked_views`)."""
     residual = dft(full.residual_time(names, theta))
     extra = kappa * grid.template if kappa > 0 else None
     marginal_view, conditional_view = full.spectrum.normalised(residual, grid.bins, extra)
-    views = {"marginal": marginal_view, "conditional": conditional_view}
-    locations, count, threshold = scan_locations(views, grid.grid, t_s, options.segments, options.alpha_locations)
+    # the estimated epochs (bridged samples, commands lost at a change) are missing, not data (.locations)
+    views = masked_views({"marginal": marginal_view, "conditional": conditional_view}, full.keep)
+    locations, count, threshold = scan_locations(views, grid.grid, t_s, options.segments, options.alpha_locations,
+                                                 keep=full.keep)
     # where in time: the window of the significant locations (the first ones)
     for i, loc in enumerate(locations[:options.max_locations]):
         if not loc.significant:
