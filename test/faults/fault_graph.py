@@ -37,7 +37,7 @@ ESTIMATE_TOPICS = tuple(f"/taiji2/estimates/grs{g}/{k}" for g in (1, 2) for k in
 #: (docs/estimators.md), and the run takes ~20 s of wall time on an idle core
 DURATION_S = 600.0
 #: what each node logs once it is up (simulator: its run line; estimator: its method line; recorder: its bag)
-_STARTED = {"spacecraft_sim": "layout type1, seed", "maneuver_commander": "preset type1",
+_STARTED = {"spacecraft_sim": "layout type1, seed", "maneuver_commander": "the paper's type1 preset",
             "scale_factor_estimator": "method gls", "com_offset_estimator": "method gls", "recorder": "recording into"}
 SEED = 4
 #: a wait bounded by simulated progress (``spin_until(..., while_moving=True)``) ends after this much wall time
@@ -116,7 +116,7 @@ class Graph:
             return ["run", "taiji2_estimator_pkg", name, *est]
         if name == "maneuver_commander":
             return ["run", "taiji2_sim_pkg", name, "--ros-args", "-p", "preset:=type1", "-p", "use_sim_time:=true",
-                    "-p", "lookahead_s:=2.0"]
+                    "-p", "lookahead_s:=2.0", "-p", "maneuver:=paper"]  # the square wave the fault-free run flies
         if name == "spacecraft_sim":
             # star tracker: scale-factor estimator + recorder; each GRS: both estimators + recorder
             return ["run", "taiji2_sim_pkg", name, "--ros-args", "-p", "layout:=type1", "-p", f"seed:={SEED}",

@@ -31,6 +31,10 @@ def _report(fault: str, node: str, **measured: object) -> None:
             out.write(json.dumps({"fault": fault, "node": node, **measured}) + "\n")
 
 
+#: the c.m.-offset estimate of a faulted run against the nested bound (see _assert_within_sigma)
+NESTED_MARGIN = 1.5
+
+
 @pytest.fixture
 def graph_context():
     ctx = rclpy.context.Context()
@@ -77,7 +81,11 @@ def _assert_within_sigma(graph: Graph, reference: dict) -> dict[str, float]:
         value, sigma, _, _ = graph.estimates()[topic]
         ref_value, ref_sigma, _, _ = reference[topic]
         assert np.all(np.isfinite(sigma)), f"{topic}: estimate not determined"
-        bound = np.maximum(ref_sigma, 3.0 * np.sqrt(np.maximum(sigma**2 - ref_sigma**2, 0.0)))
+        # the c.m.-offset estimator adapts its readout noise R to the data it has (docs/estimators.md), so a
+        # subset's estimate is not exactly the nested efficient one: measured up to 1.14 of the nested bound
+        # over kill runs (a corrupted state lands at 6 and more); NESTED_MARGIN covers that, not more
+        margin = NESTED_MARGIN if topic.endswith("com_offset") else 1.0
+        bound = np.maximum(ref_sigma, 3.0 * margin * np.sqrt(np.maximum(sigma**2 - ref_sigma**2, 0.0)))
         gap = np.abs(value - ref_value) / bound
         gaps[topic] = float(gap.max())
         assert np.all(gap <= 1.0), f"{topic}: |estimate - fault-free| / bound = {gap}; sigma {sigma} vs {ref_sigma}"

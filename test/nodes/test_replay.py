@@ -74,7 +74,10 @@ def test_bag_replayed_into_the_estimators_reproduces_the_live_estimates(tmp_path
             executor.spin_once(timeout_sec=0.1)
             assert time.monotonic() < deadline, {k: m.header.stamp.sec for k, m in latest.items()}
         assert player.wait(timeout=60) == 0, player.stderr.read()
-        assert all(m.samples_used == round(DURATION_S * 10) and m.samples_rejected == 0 for m in latest.values()), {
+        # every sample reached the replayed estimators: used, or rejected by a gate (the design's readout clips at
+        # the GRS range in ~0.1 % of the samples, and the c.m.-offset gate refuses such an epoch), as live
+        assert all(m.samples_used + m.samples_rejected == round(DURATION_S * 10) and m.samples_rejected <= 6
+                   for m in latest.values()), {
             k: (m.samples_used, m.samples_rejected, estimate_stamps_ns(m)) for k, m in latest.items()}
         for g in (1, 2):
             sf = latest[f"/taiji2/estimates/grs{g}/scale_factors"]

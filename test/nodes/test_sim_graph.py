@@ -52,7 +52,8 @@ def _run_graph(context, executor, sim_context, sim_args, duration_s, commander=T
     executor.add_node(observer)
     if commander:
         cmd = ManeuverCommander(context=context,
-                                cli_args=["--ros-args", "-p", "use_sim_time:=true", "-p", "lookahead_s:=1.0"])
+                                cli_args=["--ros-args", "-p", "use_sim_time:=true", "-p", "lookahead_s:=1.0",
+                                          "-p", "maneuver:=paper"])  # the batch core flies the config's wave
         executor.add_node(cmd)
     sim = SpacecraftSim(context=sim_ctx, cli_args=["--ros-args", "-p", f"duration_s:={duration_s}", "-p", "seed:=42",
                                                     "-p", "wait_for_subscribers:=[1, 1, 1]", *sim_args])

@@ -58,7 +58,7 @@ class WrenchStamped_(IdlStruct, typename="geometry_msgs::msg::dds_::WrenchStampe
 
 def _start_commander(*ros_args: str) -> subprocess.Popen:
     cmd = [PYTHON, "-m", "taiji2_apps.cli.main", "run", "taiji2_sim_pkg", "maneuver_commander",
-           "--ros-args", "-p", "publish_rate_hz:=20.0", *ros_args]
+           "--ros-args", "-p", "publish_rate_hz:=20.0", "-p", "maneuver:=paper", *ros_args]
     return subprocess.Popen(cmd, env=python_subprocess_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
 
