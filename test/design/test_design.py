@@ -90,7 +90,7 @@ def test_maneuver_file_round_trips_through_the_commander_and_the_sim_core(tmp_pa
 
     path = tmp_path / "m.yaml"
     save_maneuver_file(path, maneuver, "test")
-    node = ManeuverCommander(context=context, cli_args=["-p", f"maneuver:={path}"])
+    node = ManeuverCommander(context=context, cli_args=["--ros-args", "-p", f"maneuver:={path}"])
     try:
         config = load_config("type1")
         n = 10_000

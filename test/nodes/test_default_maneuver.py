@@ -20,8 +20,9 @@ def test_the_commander_and_the_planner_fly_the_verbs_default_by_default(context,
     from taiji2_sim_pkg.nodes.maneuver_commander import ManeuverCommander
 
     chosen = choose_maneuver(layout, None, None)
-    commander = ManeuverCommander(context=context, cli_args=["-p", f"preset:={layout}"])
-    planner = CommandPlanner(context=context, cli_args=["-p", f"preset:={layout}", "-p", "start_s:=0.0"])
+    commander = ManeuverCommander(context=context, cli_args=["--ros-args", "-p", f"preset:={layout}"])
+    planner = CommandPlanner(context=context,
+                             cli_args=["--ros-args", "-p", f"preset:={layout}", "-p", "start_s:=0.0"])
     try:
         assert commander._choice.kind == chosen.kind == "design"
         assert maneuver_spec(commander._maneuver) == maneuver_spec(chosen.maneuver)
@@ -38,8 +39,9 @@ def test_the_commander_and_the_planner_fly_the_verbs_default_by_default(context,
 def test_paper_or_square_wave_keys_fly_the_preset(context):
     from taiji2_sim_pkg.nodes.maneuver_commander import ManeuverCommander
 
-    paper = ManeuverCommander(context=context, cli_args=["-p", "maneuver:=paper"])
-    period = ManeuverCommander(context=context, cli_args=["-r", "__node:=commander_2", "-p", "period_s:=300.0"])
+    paper = ManeuverCommander(context=context, cli_args=["--ros-args", "-p", "maneuver:=paper"])
+    period = ManeuverCommander(context=context,
+                               cli_args=["--ros-args", "-r", "__node:=commander_2", "-p", "period_s:=300.0"])
     try:
         assert paper._choice.kind == "paper" and paper._maneuver.period_s == 250.0
         # a square-wave key without a maneuver describes a square wave: the preset's, modified
@@ -53,7 +55,7 @@ def test_a_maneuver_that_cannot_be_flown_is_one_line_naming_it(context):
     from taiji2_sim_pkg.nodes.maneuver_commander import ManeuverCommander
 
     with pytest.raises(ValueError, match=r"no_such\.yaml"):
-        ManeuverCommander(context=context, cli_args=["-p", "maneuver:=no_such.yaml"])
+        ManeuverCommander(context=context, cli_args=["--ros-args", "-p", "maneuver:=no_such.yaml"])
 
 
 @pytest.mark.parametrize("asked, overrides, end_s", [
@@ -64,7 +66,8 @@ def test_the_simulator_runs_to_the_end_of_the_same_maneuver(context, asked, over
     if end_s == "design":
         end_s = choose_maneuver("type1", None, None).duration_s
     args = ["-p", f"maneuver:={asked}"] if asked else []
-    node = SpacecraftSim(context=context, cli_args=[*args, "-p", "seed:=1", "-p", f"config_overrides:={overrides}"])
+    node = SpacecraftSim(context=context,
+                         cli_args=["--ros-args", *args, "-p", "seed:=1", "-p", f"config_overrides:={overrides}"])
     try:
         assert node._n_steps == round(end_s / 0.1)
     finally:
