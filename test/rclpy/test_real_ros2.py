@@ -229,10 +229,12 @@ def test_every_taiji2_message_type_crosses_between_rclpy_and_embedded_both_ways(
         assert _rmw_warnings(drive.stderr + err) == [], drive.stderr + err
 
 
-def test_runtime_and_node_suites_pass_under_real_rclpy(ros):
-    # the runtime and node tests again, now with rclpy and the colcon-built messages; tests of the
-    # embedded runtime's own internals skip themselves with their reason (test/conftest.py). Run alone
-    # (not beside the CLI tests): its graphs and the ros2 CLI calls each bound their waits in wall time
-    out = ros(f"cd {REPO} && TAIJI2_RUNTIME=rclpy python3 -m pytest -q -p no:cacheprovider -rs "
-              "test/runtime test/nodes", timeout=900)
+def test_node_suite_passes_under_real_rclpy(ros):
+    # the node tests again (every node, graph and experiment), now with rclpy and the colcon-built messages;
+    # tests of the embedded runtime's own internals skip themselves with their reason (test/conftest.py).
+    # test/runtime (mostly the embedded runtime itself, which rclpy replaces) is left out for CI time: with
+    # it the CI took 21 min against its 20-min limit. Run alone (not beside the CLI tests): its graphs and the
+    # ros2 CLI calls each bound their waits in wall time
+    out = ros(f"cd {REPO} && TAIJI2_RUNTIME=rclpy python3 -m pytest -q -p no:cacheprovider -rs test/nodes",
+              timeout=900)
     assert out.returncode == 0, out.stdout[-6000:] + out.stderr[-2000:]
