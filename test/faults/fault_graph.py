@@ -122,7 +122,8 @@ class Graph:
             return ["run", "taiji2_sim_pkg", name, "--ros-args", "-p", "layout:=type1", "-p", f"seed:={SEED}",
                     "-p", f"duration_s:={self.duration_s}", "-p", "wait_for_subscribers:=[2, 3, 3]",
                     "-p", "exit_when_done:=false", "-p", "publish_truth:=false",
-                    "-p", "config_overrides:=" + json.dumps([f"maneuver.duration_s={self.duration_s}"])]
+                    "-p", "config_overrides:=" + json.dumps([f"maneuver.duration_s={self.duration_s}",
+                                                             "grs.readout_saturation=false"])]
         bag = self.root / f"bag{len(self.bags)}"
         self.bags.append(bag)
         return ["bag", "record", "-a", "-o", str(bag), *self.recorder_extra]

@@ -13,7 +13,8 @@ Definitions (``docs/diagnosis.md``):
 - *held-out shrink*: the magnitude is fitted on the training part and applied, fixed, to the
   held-out part (recalibrated there): ``G_ho / max(G_best + R+, F)`` with G_ho the held-out gain of
   the trained magnitude, G_best that of the held-out part's own fit; ``heldout_z`` tests G_ho
-  against "no effect" (G_ho ~ N(-P, 4P), P the held-out power of the trained signature).
+  against "no effect" (G_ho ~ N(-P, 4P), P the held-out power of the trained signature; for the
+  star-tracker noise, the mean and std of G_ho with no extra noise, ``Record.noise_gain_null``).
 """
 
 from __future__ import annotations
@@ -190,9 +191,11 @@ def held_out_noise(train: Record, test: Record, others: Sequence[str], band_edge
     remaining = excess(residual, test.marginal(kappa_best), cells)
     magnitude, sigma = NoiseCandidate.magnitude(kappa_tr, sigma_tr)
     denominator = max(gain_best + max(remaining, 0.0), floor)
+    null_mean, null_sd = test.noise_gain_null(residual, kappa_tr)
     return {"magnitude_train": magnitude, "sigma_train": sigma, "heldout_delta_chi2": gain_fixed,
             "heldout_delta_chi2_best": gain_best,
-            "shrink_heldout": gain_fixed / denominator if denominator > 0 else None, "heldout_z": None}
+            "shrink_heldout": gain_fixed / denominator if denominator > 0 else None,
+            "heldout_z": (gain_fixed - null_mean) / null_sd if null_sd > 0 else None}
 
 
 def how_far(record: Record, top: Sequence[Location], accepted: Sequence[Candidate | NoiseCandidate],

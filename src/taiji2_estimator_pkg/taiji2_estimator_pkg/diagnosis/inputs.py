@@ -241,7 +241,7 @@ def _bridge_all(values: dict[str, np.ndarray], present: dict[str, np.ndarray], t
     bridged = {}
     n = _bridge(values["star_tracker"], present["star_tracker"], quaternion=True)
     if n:
-        bridged["star_tracker"] = n
+        bridged["star_tracker"] = int(n)
     received = {g: present[g].copy() for g in ("grs1", "grs2")}
     own = {}  # each GRS from the command's step and its neighbours: the fallback, and the map's regressors
     for g in received:

@@ -470,6 +470,29 @@ class Record:
         a, v, template = self._noise_terms(residual)
         return -2.0 * self._objective(a, v, template, kappa)
 
+    def noise_gain_null(self, residual: np.ndarray, kappa: float) -> tuple[float, float]:
+        """Mean and std of :meth:`noise_gain_at` at ``kappa`` when the data hold no extra noise
+        (:meth:`null_moments`); the held-out z of the noise effect tests its gain against them."""
+        a, _, template = self._noise_terms(residual)
+        return self.null_moments(a, template, kappa)
+
+    @staticmethod
+    def null_moments(a: np.ndarray, template: np.ndarray, kappa: float) -> tuple[float, float]:
+        """Mean and std of the gain ``-2 sum_k [log det(I + A K) - v^H M v]`` for ``v ~ CN(0, A)``.
+
+        ``M = K (I + A K)^-1`` is Hermitian, so for a complex circular Gaussian v
+        ``E[v^H M v] = tr(M A)`` and ``Var[v^H M v] = tr((M A)^2)``: ``E = -2 sum_k [log det(I + A K)
+        - tr(M A)]``, ``Var = 4 sum_k tr((M A)^2)``. With no extra noise ``v = U^H S^-1 Y ~ CN(0, A)``.
+        """
+        k = kappa * template
+        m_inv = np.eye(a.shape[-1]) + a * k[:, None, :]  # I + A K
+        _, logdet = np.linalg.slogdet(m_inv)
+        ma = k[:, :, None] * np.linalg.solve(m_inv, a)  # M A = K (I + A K)^-1 A
+        trace = np.einsum("kii->k", ma).real
+        trace_sq = np.einsum("kij,kji->k", ma, ma).real
+        mean = -2.0 * float(np.sum(logdet - trace))
+        return mean, 2.0 * math.sqrt(max(float(np.sum(trace_sq)), 0.0))
+
 
 def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings, iterations: int,
               progress: Callable[[str], None],

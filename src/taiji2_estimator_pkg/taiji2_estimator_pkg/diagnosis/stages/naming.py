@@ -96,6 +96,12 @@ def _apply_naming_rule(verdict: dict[str, Any], reports: Sequence[EffectReport],
     if not rejected:
         return
     names = list(dict.fromkeys(report.name for report in named))
+    if not names and not remaining and not verdict.get("significant_locations_before"):
+        # selected on the likelihood alone (no location stood out before, none after) and refused by the
+        # rule: a fluctuation of the noise, not a gap
+        verdict.update({"effects": [], "unexplained": False, "summary": "no significant gap",
+                        "accepted_variants": [], "rejected": rejected})
+        return
     cells = [cell for report in reports if report.key in rejected for cell in report.cells]
     where = describe_locations(remaining) if remaining else describe_locations(cells)
     summary = f"unexplained gap at {where}"
