@@ -237,7 +237,7 @@ def test_node_suite_passes_under_real_rclpy(ros):
     # played into fresh estimator nodes: 69 s of the 168 s of test/nodes under rclpy; the experiment under
     # rclpy is test_experiment_cli's, the estimator nodes' every path the other node tests'). Run alone (not
     # beside the CLI tests): its graphs and the ros2 CLI calls each bound their waits in wall time
+    replay = "test/nodes/test_replay.py::test_bag_replayed_into_the_estimators_reproduces_the_live_estimates"
     out = ros(f"cd {REPO} && TAIJI2_RUNTIME=rclpy python3 -m pytest -q -p no:cacheprovider -rs test/nodes "
-              "--deselect test/nodes/test_replay.py::test_bag_replayed_into_the_estimators_reproduces_the_live_estimates",
-              timeout=900)
+              f"--deselect {replay}", timeout=900)
     assert out.returncode == 0, out.stdout[-6000:] + out.stderr[-2000:]
