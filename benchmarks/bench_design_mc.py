@@ -6,8 +6,9 @@ engine's ``open_cluster``: an embedded LocalCluster of ``--workers`` single-thre
 Reports per parameter error std / CRLB (goal [0.8, 1.25]) and std of error / reported sigma (goal 1)
 with the standard error of a std over the seeds; the GRS range (fraction of the samples beyond it,
 signal plus every noise, and peaks); and the fraction of the seeds that meet every requirement as
-the experiment's verdict judges one run (each of the 12 parameters: reported 1-sigma, bound and
-error within the requirement; the range: at most 0.1 % of the samples of each TM axis beyond it).
+the experiment's verdict judges one run (each of the 12 parameters: reported 1-sigma and bound within
+the requirement; the range: at most 0.1 % of the samples of each TM axis beyond it), and the
+fraction whose every error is within 3 sigma (the verdict's consistency check).
 
     python benchmarks/bench_design_mc.py MANEUVER_FILE [--layout type1] [--seeds 20] [--workers 2]
         [--rows FILE.jsonl]   # one JSON line per finished seed (appended; a rerun skips the seeds in it)
@@ -87,18 +88,22 @@ def summarize(layout: str, maneuver_file: str, rows: list[dict]) -> None:
     crlb = ratios * req
     outside = np.array([np.asarray(r["samples_outside"], dtype=float) / r["samples"] for r in rows])  # (seeds, 2, 3)
     range_met = outside.reshape(seeds, -1).max(axis=1) <= RANGE_FRACTION_LIMIT
-    params_met = np.all((sig <= req) & (np.abs(err) <= req) & (ratios <= 1.0), axis=1)
+    # the verdict's rule (taiji2_estimator_pkg.verdict): reported 1-sigma and bound within each requirement, the
+    # range; the error is its consistency check (beyond 3 sigma), not a requirement
+    params_met = np.all((sig <= req) & (ratios <= 1.0), axis=1)
     every = params_met & range_met
-    sigma_met = np.all((sig <= req) & (ratios <= 1.0), axis=1) & range_met
+    consistent = np.all(np.abs(err) <= 3.0 * sig, axis=1)
+    errors_within = np.all(np.abs(err) <= req, axis=1)
     se = 1 / np.sqrt(2 * (seeds - 1)) if seeds > 1 else float("nan")
     print(f"{layout}, {maneuver_file}, {seeds} seeds (first {rows[0]['seed']}) x {maneuver.duration_s:g} s "
           f"({maneuver.duration_s / 3600:.2f} h), every noise on, readout saturating; standard error of a std {se:.3f}")
-    print(f"  seeds meeting every requirement (12 parameters: 1-sigma, bound and error within; range: <= "
-          f"{RANGE_FRACTION_LIMIT:.1%} of the samples of each TM axis beyond): {every.sum()}/{seeds} = "
-          f"{every.mean():.1%} (parameters {params_met.mean():.1%}, range {range_met.mean():.1%})")
-    print(f"  seeds meeting every requirement as stated (1 sigma: reported 1-sigma and bound within; range): "
-          f"{sigma_met.sum()}/{seeds} = {sigma_met.mean():.1%}; largest reported 1-sigma / requirement over seeds "
-          f"{np.max(sig / req):.3f}")
+    print(f"  seeds meeting every requirement as the verdict judges one run (12 parameters: reported 1-sigma and "
+          f"bound within; range: <= {RANGE_FRACTION_LIMIT:.1%} of the samples of each TM axis beyond): "
+          f"{every.sum()}/{seeds} = {every.mean():.1%} (parameters {params_met.mean():.1%}, range "
+          f"{range_met.mean():.1%}); largest reported 1-sigma / requirement over seeds {np.max(sig / req):.3f}")
+    print(f"  seeds with every error within 3 sigma (the verdict's consistency check): {consistent.sum()}/{seeds} = "
+          f"{consistent.mean():.1%} (12 Gaussian errors: 96.8 % expected); every error within the requirement "
+          f"(not a requirement): {errors_within.mean():.1%}")
     print("  parameter       CRLB/req  err std/CRLB  std(err/sigma)  mean sigma/CRLB  |err|>req seeds")
     for k, name in enumerate(PARAMETER_NAMES):
         std = err[:, k].std(ddof=1)

@@ -227,8 +227,7 @@ def pass_of(ground_time_s: float | None, model: Any) -> int | None:
 
 
 #: the verdict's classes of a requirement not met, in the words of the link report
-_NOT_MET_WHY = {"cannot": "the Cramer-Rao bound is beyond it", "estimator": "the 1-sigma is beyond it",
-                "chance": "the error of this run is beyond it"}
+_NOT_MET_WHY = {"cannot": "the Cramer-Rao bound is beyond it", "estimator": "the 1-sigma is beyond it"}
 
 
 def format_link_report(link: dict[str, Any]) -> str:
