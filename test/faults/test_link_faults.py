@@ -38,12 +38,20 @@ SMALL_MEMORY_OCTETS = 1_000_000
 def test_a_link_fault_ends_with_a_verdict_that_names_it(tmp_path, fault, memory, named):
     link = tmp_path / "link.yaml"
     link.write_text(FAST_LINK % memory)
-    out = tmp_path / "out"
+    out, bag = tmp_path / "out", tmp_path / "ground"
+    # the missed pass's run is recorded on the ground too: calibrate of that recording must give its verdict
+    record = ["--record", str(bag)] if named == "missed" else []
     proc = run_taiji2("experiment", "--link", str(link), "--duration-s", "1800", "--link-fault", fault,
-                      "--out", str(out), timeout=900)
+                      "--out", str(out), *record, timeout=900)
     assert proc.returncode in (0, 3), proc.stderr[-3000:]  # 1 would be a failure (a stall), 2 bad input
     results = json.loads((out / "results.json").read_text())
     warnings = " | ".join(results["verdict"]["warnings"])
     assert named in warnings.lower() or named in json.dumps(results["link"]["faults"]).lower(), warnings
     assert any(w.startswith("link fault:") for w in results["verdict"]["warnings"]), warnings
     assert (proc.returncode == 0) == results["verdict"]["all_met"]
+    if record:  # one verdict per run: the same maneuver, the same requirements met (on the 1-sigma), either verb
+        calibrated = run_taiji2("calibrate", str(bag), "--json", timeout=300)
+        assert calibrated.returncode in (0, 3), calibrated.stderr[-3000:]
+        verdict = json.loads(calibrated.stdout)["verdict"]
+        assert verdict["maneuver"] == results["verdict"]["maneuver"], (verdict["maneuver"], results["verdict"])
+        assert verdict["met"] == results["verdict"]["met"], (verdict, results["verdict"])
