@@ -129,7 +129,8 @@ def test_sigkill_loses_at_most_the_last_second(tmp_path, storage):
 def test_simulated_experiment_record_info_decode_and_replay(tmp_path):
     bag, replayed = tmp_path / "experiment", tmp_path / "replayed"
     env = _env()
-    recorder = subprocess.Popen(_taiji2("bag", "record", "-a", "--use-sim-time", "-o", str(bag)), env=env,
+    recorder = subprocess.Popen(_taiji2("bag", "record", "-a", "--use-sim-time", "-o", str(bag), "--custom-data",
+                                        "mission.pass=42", "mission.note=a=b"), env=env,
                                 stderr=subprocess.PIPE, text=True)
     sim = commander = None
     try:
@@ -158,6 +159,8 @@ def test_simulated_experiment_record_info_decode_and_replay(tmp_path):
     assert summary["custom_data"]["taiji2.sim.seed"] == "1"
     assert summary["custom_data"]["taiji2.sim.provenance"]["config"]["layout"] == "type1"
     assert "bag record -a" in summary["custom_data"]["taiji2.recorder.command_line"]
+    # --custom-data, as ros2 bag record's: stored verbatim (the first '=' splits)
+    assert summary["custom_data"]["mission.pass"] == "42" and summary["custom_data"]["mission.note"] == "a=b"
     exp = load_raw_bag(bag)
     assert len(exp.star_tracker) == 200 and exp.star_tracker.stamp_ns[-1] == 20 * 10**9
     assert all(not r.dropped for r in exp.report.values()), exp.report_lines()

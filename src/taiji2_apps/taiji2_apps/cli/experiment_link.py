@@ -368,8 +368,11 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         "-p", f"maneuver:={args.maneuver}",
         "-p", "publish_truth_kinematics:=false", "-p", "config_overrides:=" + json.dumps(overrides)], ends=True))
     if args.record:
-        nodes.append(NodeProcess.taiji2("recorder", ["bag", "record", "-a", "-x", "^/(onboard|taiji2/sim)/", "-o",
-                                                     args.record], stop_last=True))
+        # the ground sees no simulator provenance (onboard): it stores what it commanded, under the key a
+        # recording's readers take the flown maneuver from (bag/provenance.py)
+        nodes.append(NodeProcess.taiji2("recorder", [
+            "bag", "record", "-a", "-x", "^/(onboard|taiji2/sim)/", "-o", args.record,
+            "--custom-data", f"taiji2.sim.maneuver={plan.maneuver_label}"], stop_last=True))
     rclpy.init(args=["taiji2-experiment"])
     node = rclpy.create_node("taiji2_experiment_link")
     monitor = LinkMonitor(node)

@@ -68,6 +68,8 @@ class RecordOptions:
         See :class:`~taiji2_runtime.bag.writer.BagWriter`.
     command_line : list of str
         Stored in the provenance.
+    custom_data : dict of str to str
+        More custom data to store (``--custom-data``; e.g. what a ground recording's run commanded).
     """
 
     output: Path
@@ -82,6 +84,7 @@ class RecordOptions:
     journal_period_s: float = 0.5
     segment_period_s: float = 300.0
     command_line: list[str] = field(default_factory=lambda: list(sys.argv))
+    custom_data: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -203,7 +206,7 @@ class Recorder:
         self.writer = BagWriter(options.output, self._store, storage=options.storage,
                                 journal_period_s=options.journal_period_s,
                                 segment_period_s=options.segment_period_s)
-        for key, value in recorder_provenance(options.command_line).items():
+        for key, value in {**recorder_provenance(options.command_line), **options.custom_data}.items():
             self.writer.set_custom_data(key, value)
         self._probe = PublisherQosProbe(node)
         self._subscriptions: dict[str, Any] = {}

@@ -46,6 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="start a new storage file every S wall seconds (default 300)")
     rec.add_argument("--journal-period", type=float, default=0.5, metavar="S",
                      help="crash safety: at most the last S wall seconds are lost on SIGKILL (default 0.5)")
+    rec.add_argument("--custom-data", nargs="+", default=[], metavar="KEY=VALUE",
+                     help="store these pairs in the bag's custom data (metadata.yaml), as ros2 bag record does")
 
     play = sub.add_parser("play", help="publish the messages of a bag",
                           description="Publish a bag's messages, byte for byte, with their original timing "
@@ -125,6 +127,17 @@ def _init_rclpy(rclpy: Any, stop: _Stop) -> None:
     stop.install()  # after init: replaces the handlers the embedded runtime installs
 
 
+def _pairs(items: list[str]) -> dict[str, str]:
+    """``KEY=VALUE`` items as a dict; a bad item is a ValueError naming it."""
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ValueError(f"--custom-data: {item!r} is not KEY=VALUE")
+        out[key] = value
+    return out
+
+
 def _record(args: argparse.Namespace) -> int:
     from taiji2_runtime.bag.recorder import Recorder, RecordOptions
     from taiji2_runtime.ros import rclpy
@@ -133,7 +146,8 @@ def _record(args: argparse.Namespace) -> int:
     options = RecordOptions(output=output, topics=list(args.topics), all_topics=args.all, regex=args.regex,
                             exclude=args.exclude, include_hidden=args.include_hidden_topics, storage=args.storage,
                             max_duration_s=args.max_duration, segment_period_s=args.max_bag_duration,
-                            journal_period_s=args.journal_period, command_line=["taiji2", *sys.argv[1:]])
+                            journal_period_s=args.journal_period, command_line=["taiji2", *sys.argv[1:]],
+                            custom_data=_pairs(args.custom_data))
     if not (options.topics or options.all_topics or options.regex):
         raise ValueError("nothing to record: give topics, -a/--all or -e/--regex")
     stop = _Stop()
