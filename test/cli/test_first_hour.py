@@ -190,6 +190,17 @@ def test_calibrate_table_has_no_truth_columns_without_truth():
     assert "truth" not in real and "err/sig" not in real and "error %" not in real
     simulated = format_table(EstimateTable("gls", [grs(1, True), grs(2, True)]))
     assert "truth" in simulated and "err/sig" in simulated
+    # the req column judges the 1-sigma, as the verdict does, with or without the truth (here: G 1-sigma 1e-11 of
+    # 5.5e-8 ok; d 1-sigma 100 um ok), never the error of the draw
+    off = grs(1, True)
+    off.com_offset_m = off.com_offset_m + 150e-6  # 1.5 sigma, beyond 100 um
+    rows = [line for line in format_table(EstimateTable("gls", [off, grs(2, True)])).splitlines()
+            if line.startswith("  GRS1") and "samples" not in line]
+    assert len(rows) == 6 and all(line.endswith(" ok") for line in rows), rows
+    assert all(line.endswith(" ok") for line in real.splitlines() if line.startswith("  GRS") and "samples" not in line)
+    wide = grs(2, False)
+    wide.com_offset_cov = np.eye(3) * (150e-6) ** 2
+    assert format_table(EstimateTable("gls", [grs(1, False), wide])).count(" MISS") == 3
 
 
 def test_diagnose_says_what_shrink_is():
