@@ -42,10 +42,12 @@ def _calibrate(ros, bag) -> dict:
     return result
 
 
-# MCAP with rosbag2's zstd preset (chunks compressed: the harder MCAP; plain MCAP is also what the recorder's own
-# bag and the main suite's foreign-writer tests cover) and sqlite3; a third, plain-MCAP run cost ~45 s of CI
-@pytest.mark.parametrize("storage,options", [("mcap", "--storage-preset-profile zstd_fast"), ("sqlite3", "")],
-                         ids=["mcap-zstd", "sqlite3"])
+# sqlite3, Humble's default storage (MCAP, Jazzy's default, is what the recorder's own bag and the main suite's
+# foreign-writer tests cover). Each storage costs ~45 s of CI: MCAP with rosbag2's zstd preset (chunks compressed)
+# ran here too until CI passed its 20-min limit (run it: pytest -m long test/rclpy with TAIJI2_RCLPY_TIER=1)
+@pytest.mark.parametrize("storage,options", [
+    pytest.param("mcap", "--storage-preset-profile zstd_fast", id="mcap-zstd", marks=pytest.mark.long),
+    pytest.param("sqlite3", "", id="sqlite3")])
 def test_ros2_bag_record_is_calibrated_and_the_recorders_bag_is_played_by_ros2_bag(ros, tmp_path, storage,
                                                                                    options):
     theirs, ours = tmp_path / "rosbag2", tmp_path / "taiji2"
