@@ -18,6 +18,7 @@ Two studies:
 
     python benchmarks/bench_link.py [--studies graph,mc] [--seeds 50] [--duration-s 10800]
                                     [--graph-duration-s 86400] [--out DIR] [--baseline]
+                                    [--maneuver paper] [--override grs.readout_saturation=false]
 """
 
 from __future__ import annotations
@@ -234,6 +235,10 @@ def graph(args: argparse.Namespace) -> None:
     cmd = [sys.executable, "-m", "taiji2_apps.cli.main", "experiment", "--link", "deep_space", "--layout", "type1",
            "--duration-s", str(args.graph_duration_s), "--record", str(bag), "--out", str(out / "run"), "--json",
            "--timeout-s", "20000"]
+    if args.maneuver:
+        cmd += ["--maneuver", args.maneuver]
+    for override in args.override:
+        cmd += ["--override", override]
     started = time.monotonic()
     cpu_before = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
@@ -282,6 +287,10 @@ def main() -> None:
     parser.add_argument("--duration-s", type=float, default=10800.0, help="MC record length [s]")
     parser.add_argument("--graph-duration-s", type=float, default=86400.0)
     parser.add_argument("--out", default="")
+    parser.add_argument("--maneuver", default="", help="graph: the experiment's --maneuver (default: its default)")
+    parser.add_argument("--override", action="append", default=[],
+                        help="graph: a simulator override dotted.key=value (repeatable), e.g. "
+                             "grs.readout_saturation=false to compare with code from before the range requirement")
     parser.add_argument("--baseline", action="store_true",
                         help="MC: also calibrate each seed's complete record (the link's paired effect)")
     args = parser.parse_args()

@@ -35,6 +35,7 @@ _SPECS = {
     "actuation_delay": {"delay_s": 0.1},
     "thruster_response": {"time_constant_s": 0.1},
     "grs_time_offset": {"offset_s": 0.05},
+    "impulse": {"time_s": 200.03, "angular_momentum_n_m_s": [2e-7, 0.0, 0.0], "linear_impulse_n_s": [1e-7, 0.0, 0.0]},
 }
 
 

@@ -36,7 +36,7 @@ def test_readme_pip_command_completes_the_tools_under_ros2_run(ros, tmp_path):
                            "--seed", "6", "--out", str(bag)], capture_output=True, text=True, timeout=300)
     assert made.returncode == 0, made.stderr[-2000:]
     userbase = tmp_path / "userbase"
-    pip = "PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install -q --user --disable-pip-version-check"
+    pip = "PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install -q --user --disable-pip-version-check --no-compile"
     # ROS 2 and the workspace only: the ros fixture's PYTHONPATH (the test venv's packages) is dropped
     out = ros(f"export PYTHONPATH=$(echo $PYTHONPATH | tr ':' '\\n' | grep -e /opt/ros -e /install/ | paste -sd:) && "
               f"{pip} {' '.join(ROSDEP_STAND_INS)} && {_readme_pip_line()} && "

@@ -16,6 +16,7 @@ from taiji2_model.effect_catalog import (
     EffectParameterError,
     GravityGradient,
     GrsTimeOffset,
+    Impulse,
     InertiaError,
     ReadoutNonlinearity,
     ScaleFactorDrift,
@@ -73,6 +74,7 @@ ACTIVE = {
     "actuation_delay": (lambda: ActuationDelay(0.13), {"st", "grs1", "grs2"}),
     "thruster_response": (lambda: ThrusterResponse(0.2), {"st", "grs1", "grs2"}),
     "grs_time_offset": (lambda: GrsTimeOffset(0.05), {"st", "grs1", "grs2"}),
+    "impulse": (lambda: Impulse(10.03, (2e-7, 0.0, 0.0), (1e-7, 0.0, 0.0)), {"st", "grs1", "grs2"}),
 }
 
 
@@ -108,7 +110,8 @@ def test_disabled_or_zero_is_bit_identical(name, config, commands, baseline):
         assert np.array_equal(out.st_quat_xyzw, baseline.st_quat_xyzw)
 
 
-@pytest.mark.parametrize("name", ["time_offset", "tm_stiffness", "star_tracker_lowfreq_noise", "gravity_gradient"])
+@pytest.mark.parametrize("name", ["time_offset", "tm_stiffness", "star_tracker_lowfreq_noise", "gravity_gradient",
+                                  "impulse"])
 def test_streaming_equals_batch(name, config, commands):
     """Effects with memory give the same data stepped one sample at a time."""
     factory, _ = ACTIVE[name]

@@ -83,12 +83,13 @@ __all__ = ["FAMILIES", "ONSET_KINDS", "TIMING_FAMILIES", "Candidate", "Candidate
 FAMILIES = ("scale_factor_drift", "cross_coupling", "time_offset", "star_tracker_lowfreq_noise",
             "thruster_torque_gain", "com_drift", "readout_nonlinearity", "inertia_error", "gravity_gradient",
             "tm_stiffness", "thruster_force_leakage", "actuation_delay", "thruster_response", "grs_time_offset")
-"""Effect families the diagnosis knows (the catalog of the simulator)."""
+"""Effect families the diagnosis selects among (the catalog of the simulator, less ``impulse``: an impulse at an
+unknown time is found by its own matched filter in the final residual, :mod:`.impulses`)."""
 
 TIMING_FAMILIES = ("time_offset", "actuation_delay", "thruster_response", "grs_time_offset")
 """Families that are timing conventions (stamps, latency, thrust response), not physics."""
 
-ONSET_KINDS = {family: "step" for family in FAMILIES}
+ONSET_KINDS = {family: "step" for family in (*FAMILIES, "impulse")}
 ONSET_KINDS.update({"scale_factor_drift": "ramp", "com_drift": "ramp"})
 """How each family starts mid-run (docs/diagnosis.md): a drift starts drifting (``ramp``: its clock starts at
 the onset), everything else switches on (``step``: the change is zero before the onset)."""

@@ -101,7 +101,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     reports = check_held_out(inp, calibrated, selection, how_far.reports, options, say)
     lap("held_out")
     reports, verdict = name_effects(calibrated, selection, final, reports)
-    corrected = correct_calibration(inp, nominal, calibrated, reports, verdict, options, say)
+    corrected = correct_calibration(inp, nominal, calibrated, reports, verdict, options, say, final.impulses)
     lap("corrected")
 
     result.calibration = {**calibrated.calibration, "readout_response": where.readout_response,
@@ -110,6 +110,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     result.location_threshold, result.locations_after = where.before.threshold, final.after.locations
     result.steps, result.effects, result.verdict, result.how_far = selection.steps, reports, verdict, how_far.how_far
     result.corrected, result.extended_layout = corrected.calibration, corrected.layout
+    result.impulses = final.impulses.to_dict()
     result.plots = plot_data(calibrated, where, final, reports, options)
     result.timing_s = lap.total()
     say(f"done in {result.timing_s['total']:.1f} s: {verdict['summary']}")

@@ -168,6 +168,18 @@ class Record:
             self.design.append(self.whitener, names, ffts)
         return names
 
+    def add_candidate(self, candidate: Candidate) -> list[str]:
+        """Build the columns of a candidate the record was not made with into the fit (an impulse found in the
+        final residual); returns their names."""
+        names = candidate.column_names()
+        ffts = [column_fft(column, self.k_max) for column in candidate.build(self.ctx_of(candidate))]
+        self.candidates[candidate.key] = candidate
+        for name, fft in zip(names, ffts, strict=True):
+            self.ffts[name] = fft
+        self.names = [*self.names, *names]
+        self.design.append(self.whitener, names, ffts)
+        return names
+
     def set_exact_secant(self, candidate: Candidate, value: float, change: np.ndarray) -> None:
         """Make a one-parameter candidate's column ``change / value`` ((n, 15) channel change at
         ``value``, computed exactly rather than from its knots): theta x column is then exact at value."""

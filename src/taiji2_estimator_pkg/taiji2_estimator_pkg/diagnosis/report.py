@@ -56,6 +56,28 @@ def _choice_lines(choice: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def _impulse_lines(impulses: dict[str, Any]) -> list[str]:
+    """The impulsive events section (docs/diagnosis.md, section 6b)."""
+    if not impulses:
+        return []
+    lines = ["", "## Impulsive events", "",
+             f"Matched filter in the torque-response residual, {impulses['samples_searched']} samples searched, "
+             f"threshold SNR {impulses['threshold_snr']:.2f} (a {impulses['false_alarm_per_record']:.0%} chance of "
+             "one in pure noise). Each event is fitted in the final model and left out of the calibration.", ""]
+    if impulses["abandoned"]:
+        lines += ["The search stopped at its limit: the residual is not a few impulses in Gaussian noise.", ""]
+    if not impulses["events"]:
+        return [*lines, "None found."]
+    lines += ["| time [s] | SNR | L [N m s] (x, y, z) | sigma L | p [N s] (x, y, z) | sigma p |",
+              "|---|---|---|---|---|---|"]
+    for e in impulses["events"]:
+        vector = lambda v: ", ".join(f"{x:.3g}" for x in v)  # noqa: E731
+        lines.append(f"| {e['time_s']:.2f} +- {e['time_sigma_s']:.2f} | {e['snr']:.1f} | "
+                     f"{vector(e['angular_momentum_n_m_s'])} | {vector(e['angular_momentum_sigma_n_m_s'])} | "
+                     f"{vector(e['linear_impulse_n_s'])} | {vector(e['linear_impulse_sigma_n_s'])} |")
+    return lines
+
+
 def _markdown(result: DiagnosisResult, files: list[str], choice: dict[str, Any] | None = None) -> str:
     lines = ["# Sim-to-real gap diagnosis", ""]
     verdict = result.verdict
@@ -172,6 +194,7 @@ def _markdown(result: DiagnosisResult, files: list[str], choice: dict[str, Any] 
                              f"{corrected['com_offset_sigma_m'][grs][i] * 1e6:.1f} um | "
                              f"{corrected['d_shift_sigma'][grs][i]:+.2f} |")
         lines += ["", "Covariance (12 x 12, relative G then d): report.json `corrected_calibration.covariance`."]
+    lines += _impulse_lines(result.impulses)
     remaining = result.verdict.get("remaining", [])
     lines += ["", "## Remaining gap", ""]
     if remaining:

@@ -146,6 +146,9 @@ class DiagnosisResult:
         calibration in sigmas; empty when nothing is named.
     extended_layout : dict or None
         The nominal layout extended with the named effects (``--write-config``).
+    impulses : dict
+        Impulsive events found in the final residual (:mod:`.impulses`): their times, angular momenta and
+        linear impulses with sigmas, the detection threshold (matched-filter SNR) and the samples searched.
     """
 
     status: str
@@ -165,6 +168,7 @@ class DiagnosisResult:
     model: dict[str, Any] = field(default_factory=dict)
     corrected: dict[str, Any] = field(default_factory=dict)
     extended_layout: dict[str, Any] | None = None
+    impulses: dict[str, Any] = field(default_factory=dict)
 
     def to_json_dict(self, max_locations: int = 25) -> dict[str, Any]:
         """The ``report.json`` content (keys ``locations``, ``effects``, ``verdict`` and more)."""
@@ -180,6 +184,7 @@ class DiagnosisResult:
             "steps": self.steps,
             "calibration": self.calibration,
             "corrected_calibration": self.corrected,
+            "impulses": self.impulses,
             "how_far": self.how_far,
             "inputs": self.inputs,
             "model": self.model,

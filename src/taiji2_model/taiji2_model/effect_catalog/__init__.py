@@ -37,6 +37,9 @@ tm_stiffness                   TM-to-spacecraft stiffness k acting on the suspen
                                (``stiffness_s2`` [s^-2], suspension frequency, damping)
 thruster_force_leakage         net force F = Lambda tau from the torque maneuver: a_SC += F / M
                                (``leakage_per_m`` (3, 3) [N / (N m)])
+impulse                        a delta impulse at ``time_s``: angular momentum
+                               ``angular_momentum_n_m_s`` [N m s] and linear impulse
+                               ``linear_impulse_n_s`` [N s] (a micrometeoroid impact)
 =============================  ==================================================================
 
 Registry: :data:`EFFECTS` (name -> class), :func:`make_effect` and :func:`effects_from_config`.
@@ -52,6 +55,7 @@ from taiji2_model.effect_catalog.dynamics import (
     ThrusterForceLeakage,
     ThrusterTorqueGain,
 )
+from taiji2_model.effect_catalog.impulse import Impulse
 from taiji2_model.effect_catalog.readout import CrossCoupling, ReadoutNonlinearity, ScaleFactorDrift
 from taiji2_model.effect_catalog.registry import EFFECTS, effects_from_config, make_effect
 from taiji2_model.effect_catalog.star_tracker import StarTrackerLowFreqNoise
@@ -69,6 +73,7 @@ __all__ = [
     "EffectParameterError",
     "GravityGradient",
     "GrsTimeOffset",
+    "Impulse",
     "InertiaError",
     "ReadoutNonlinearity",
     "ScaleFactorDrift",

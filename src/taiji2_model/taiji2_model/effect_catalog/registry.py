@@ -15,6 +15,7 @@ from taiji2_model.effect_catalog.dynamics import (
     ThrusterForceLeakage,
     ThrusterTorqueGain,
 )
+from taiji2_model.effect_catalog.impulse import Impulse
 from taiji2_model.effect_catalog.readout import CrossCoupling, ReadoutNonlinearity, ScaleFactorDrift
 from taiji2_model.effect_catalog.star_tracker import StarTrackerLowFreqNoise
 from taiji2_model.effect_catalog.test_mass import TmStiffness
@@ -25,7 +26,7 @@ EFFECTS: dict[str, type[Effect]] = {
     cls.name: cls
     for cls in (ScaleFactorDrift, CrossCoupling, TimeOffset, StarTrackerLowFreqNoise, ThrusterTorqueGain,
                 ComDrift, ReadoutNonlinearity, InertiaError, GravityGradient, TmStiffness, ThrusterForceLeakage,
-                ActuationDelay, ThrusterResponse, GrsTimeOffset)
+                ActuationDelay, ThrusterResponse, GrsTimeOffset, Impulse)
 }
 """Effect name -> class (the names of the issue's catalog, plus ``thruster_force_leakage``)."""
 

@@ -20,6 +20,7 @@ import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES, Candidate
 from taiji2_estimator_pkg.diagnosis.extended import Fixed, corrected_calibration, extended_layout, named_extension
+from taiji2_estimator_pkg.diagnosis.impulses import Impulses, impulse_candidate
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
@@ -41,21 +42,26 @@ class Corrected:
 
 def correct_calibration(inp: DiagnosisInput, layout: NominalModel | SimConfig, nominal: Nominal,
                         reports: Sequence[EffectReport], verdict: dict[str, Any], options: DiagnosisOptions,
-                        say: Progress) -> Corrected:
+                        say: Progress, impulses: Impulses | None = None) -> Corrected:
     """Re-calibrate G and d under the model extended with the named effects (``layout``: the nominal
-    model as given to the diagnosis, for the extended layout)."""
+    model as given to the diagnosis, for the extended layout) and the found impulses (re-fitted with them;
+    not written into the extended layout: they belong to this record, not to the instrument)."""
     start = nominal.start
     by_key = {c.key: c for c in nominal.candidates}
     standing = [f for f in verdict.get("families", []) if f["stands"]]
     timing_change, named_fixed, specs = named_extension(reports, by_key, nominal.full.onsets, start.t_mid,
                                                         start.model, standing)
-    if not (options.corrected_calibration and (named_fixed or any(timing_change))):
+    events = impulses.events if impulses is not None else []
+    if not (options.corrected_calibration and (named_fixed or any(timing_change) or events)):
         return Corrected()
     say("corrected calibration: G and d under the model extended with the named effects")
     held = [entry for entry in named_fixed if entry[0].name in TIMING_FAMILIES]
     free = [entry for entry in named_fixed if entry[0].name not in TIMING_FAMILIES]
     if verdict.get("unexplained"):
         free = complete_cross_talk(free, by_key)
+    free += [(impulse_candidate(event, start.model),
+              np.concatenate((event.angular_momentum_n_m_s, event.linear_impulse_n_s)), None, None)
+             for event in events]
     corrected = corrected_calibration(inp, start.model, start.settings, timing_change, [*start.fixed, *held],
                                       nominal.calibration, start.t_mid, max(2, options.calibration_iterations), say,
                                       free)

@@ -17,6 +17,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
+from taiji2_estimator_pkg.diagnosis.impulses import Impulses, detect_impulses, impulse_candidate, searchable
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.locations import Location
 from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
@@ -34,8 +35,12 @@ class FinalModel:
 
     Attributes
     ----------
+    current : list of str
+        The columns of the final joint fit: ``selection.current``, then the found impulses' columns.
     theta, cov, chi2 : ndarray, ndarray, float
-        The final joint fit (columns ``selection.current``).
+        The final joint fit (columns ``current``).
+    impulses : Impulses
+        Impulsive events found in the final residual (:mod:`..impulses`), fitted in the final model.
     readout_response : dict
         Readout-response fit of the final model.
     after : Scan
@@ -46,9 +51,11 @@ class FinalModel:
         ``effects``, ``unexplained``, ``summary`` and the counts behind them (before the naming rule).
     """
 
+    current: list[str]
     theta: np.ndarray
     cov: np.ndarray
     chi2: float
+    impulses: Impulses
     readout_response: dict[str, Any]
     after: Scan
     remaining: list[Location]
@@ -65,12 +72,31 @@ def final_scan(inp: DiagnosisInput, nominal: Nominal, where: Where, selection: S
             full.refine(candidate, [name for name in current if name not in names])
     _joint_timing(full, [c for c in accepted if isinstance(c, Candidate)], current)
     theta_final, cov_final, chi2_final = full.fit(current)
+    current, impulses = _impulses(inp, full, current, theta_final, say)
+    if impulses.events:
+        theta_final, cov_final, chi2_final = full.fit(current)
     say("scanning the residual with the accepted effects")
     readout_response = full.response(current, theta_final)[1].to_dict()
     after = scan(full, where.grid, inp.t_s, current, theta_final, full.kappa, options)
     remaining, verdict = _verdict(where.before, after, accepted, options)
     verdict.update({"chi2_nominal": nominal.chi2, "chi2_final": chi2_final})
-    return FinalModel(theta_final, cov_final, chi2_final, readout_response, after, remaining, verdict)
+    return FinalModel(current, theta_final, cov_final, chi2_final, impulses, readout_response, after, remaining,
+                      verdict)
+
+
+def _impulses(inp: DiagnosisInput, full: Record, current: Sequence[str], theta: np.ndarray, say: Progress
+              ) -> tuple[list[str], Impulses]:
+    """Search the final residual for impulsive events; the columns of the final fit with theirs added."""
+    residual, response = full.response(current, theta)
+    keep = searchable(inp.n, inp.torque_cmd_n_m, full.lin.torque_edges, inp.filled, full.model.dt_s)
+    impulses = detect_impulses(residual, response, full.model, inp.t_s, keep)
+    columns = list(current)
+    for event in impulses.events:
+        columns += full.add_candidate(impulse_candidate(event, full.model))
+    if impulses.events:
+        say(f"impulses: {len(impulses.events)} above SNR {impulses.threshold_snr:.2f} at "
+            + ", ".join(f"{e.time_s:.1f} s" for e in impulses.events[:5]))
+    return columns, impulses
 
 
 def _verdict(before_scan: Scan, after_scan: Scan, accepted: Sequence[Candidate | NoiseCandidate],

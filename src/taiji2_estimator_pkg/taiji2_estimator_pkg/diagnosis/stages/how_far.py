@@ -57,8 +57,8 @@ def measure_how_far(nominal: Nominal, where: Where, selection: Selection, final:
     aliases = Aliases(full, candidates, options.alias_correlation, nominal.floor[1])
     deterministic = [c for c in accepted if isinstance(c, Candidate)]
     partners = jointly_determined([c.column_names() for c in deterministic], [c.key for c in deterministic],
-                                  selection.current, final.cov, options.alias_correlation)
-    reports = _reports(full, candidates, noise, accepted, selection.noise_fit, selection.current, final.theta,
+                                  final.current, final.cov, options.alias_correlation)
+    reports = _reports(full, candidates, noise, accepted, selection.noise_fit, final.current, final.theta,
                        final.cov, final.chi2, nominal.log_n, options, nominal.start.model, aliases, nominal.floor[1],
                        partners)
     for report in reports:

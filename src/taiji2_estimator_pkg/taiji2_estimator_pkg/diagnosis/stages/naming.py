@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
+from taiji2_estimator_pkg.diagnosis.impulses import Impulses
 from taiji2_estimator_pkg.diagnosis.locations import Location
 from taiji2_estimator_pkg.diagnosis.record import Record
 from taiji2_estimator_pkg.diagnosis.results import EffectReport
@@ -31,12 +32,34 @@ def name_effects(nominal: Nominal, selection: Selection, final: FinalModel, repo
     """The reports with the effects the rule refuses marked not accepted, and the final verdict."""
     reports = [replace(report) for report in reports]
     verdict = dict(final.verdict)
-    families = _families(nominal.full, nominal.candidates, selection.accepted, selection.current, final.chi2,
+    families = _families(nominal.full, nominal.candidates, selection.accepted, final.current, final.chi2,
                          nominal.log_n)
     if families:
         verdict["families"] = families
     _apply_naming_rule(verdict, reports, final.remaining)
+    _name_impulses(verdict, final.impulses)
     return reports, verdict
+
+
+def _name_impulses(verdict: dict[str, Any], impulses: Impulses) -> None:
+    """Impulses found and fitted in the final model are named beside the catalog effects (updates ``verdict``):
+    they explain what they remove; a record of nothing else is "explained by" them, never "no significant gap"."""
+    verdict["impulses"] = len(impulses.events)
+    if impulses.abandoned:
+        verdict["summary"] += (f"; the impulse search stopped at {len(impulses.events)} events above SNR "
+                               f"{impulses.threshold_snr:.1f}: the residual is not a few impulses in Gaussian noise")
+    if not impulses.events:
+        return
+    times = ", ".join(f"{event.time_s:.1f} s" for event in impulses.events[:5])
+    more = f" and {len(impulses.events) - 5} more" if len(impulses.events) > 5 else ""
+    words = f"{len(impulses.events)} impulse{'s' if len(impulses.events) > 1 else ''} (at {times}{more})"
+    verdict["effects"] = [*verdict["effects"], "impulse"]
+    if verdict["summary"] == "no significant gap":
+        verdict["summary"] = f"explained by {words}"
+    elif verdict["summary"].startswith("explained by "):
+        verdict["summary"] += f", {words}"
+    else:
+        verdict["summary"] += f"; also found: {words}"
 
 
 def _families(full: Record, candidates: Sequence[Candidate], accepted: Sequence[Candidate | NoiseCandidate],
