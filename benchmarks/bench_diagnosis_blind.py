@@ -38,7 +38,7 @@ Usage::
     python benchmarks/bench_diagnosis_blind.py [--sets 40] [--layout type1] [--seed 1] [--workers 2]
         [--duration-s 10800] [--kmin 4] [--kmax 12] [--reference-fraction 0.5] [--json results.json]
         [--clean N] [--pairs N] [--out-of-catalog N] [--onset-fraction F] [--transients N] [--multi N]
-        [--unclipped]
+        [--impulses N] [--unclipped]
 
 The extended plan of issue 24 (onsets, multi-parameter effects, transients, both fidelities)::
 
@@ -266,6 +266,63 @@ def transient_plan(count: int, seed: int, model: NominalModel, duration_s: float
     return plan
 
 
+def impulse_plan(count: int, seed: int, model: NominalModel, duration_s: float, fidelity: str) -> list[dict]:
+    """Impulse sets: one momentum kick at a random time (10..90 % of the run), its angular momentum along a
+    random direction at a matched-filter SNR uniform in 4..16 in the torque channel (against the thruster torque
+    and GRS angular noise per sample), a linear impulse of 0..3 sigma of the thruster force noise per step along
+    another random direction."""
+    rng = np.random.default_rng(seed + 32452843)
+    dt = model.dt_s
+    # per-sample covariance of the torque channel (rad s^-2)^2: thruster torque noise through J^-1, GRS angular
+    # readout noise of the mean of the two GRS (white; docs/diagnosis.md section 3)
+    cov = model.inertia_inv @ np.diag(model.var_torque) @ model.inertia_inv.T + 0.25 * sum(
+        c.T @ np.diag(v) @ c for c, v in zip(model.c_tmrf, model.var_angular, strict=True))
+    plan = []
+    for _ in range(count):
+        direction = rng.standard_normal(3)
+        direction /= np.linalg.norm(direction)
+        snr = float(rng.uniform(4.0, 16.0))
+        acc = direction * snr / math.sqrt(direction @ np.linalg.solve(cov, direction))  # rad s^-2 in one sample
+        linear = rng.standard_normal(3)
+        linear *= (rng.uniform(0.0, 3.0) * math.sqrt(float(np.max(model.var_force_acc))) * model.mass_kg * dt
+                   / np.linalg.norm(linear))
+        plan.append({"kind": "impulse", "fidelity": fidelity, "snr": snr,
+                     "timing": _timing_convention(rng) if fidelity == "reference" else {},
+                     "effects": [{"family": "impulse", "variant": "", "k": snr, "spec": {
+                         "name": "impulse", "time_s": float(rng.uniform(0.1, 0.9) * duration_s),
+                         "angular_momentum_n_m_s": (model.inertia_kg_m2 @ acc * dt).tolist(),
+                         "linear_impulse_n_s": linear.tolist()}}]})
+    return plan
+
+
+def impulse_scores(results: list[dict]) -> dict:
+    """Impulses: found (an event within 0.2 s of the drawn time) per SNR band, the time and L errors, the
+    verdict; clean sets with a reported impulse."""
+    rows = [r for r in results if r["kind"] == "impulse"]
+    clean = [r for r in results if r["kind"] == "clean"]
+    out: dict = {"impulse_sets": len(rows),
+                 "clean_with_an_impulse": sum(bool(r["impulses"]) for r in clean) / max(len(clean), 1)}
+    found, dt_err, z = {}, [], []
+    for r in rows:
+        spec = r["drawn"][0]["spec"]
+        hits = [e for e in r["impulses"] if abs(e["time_s"] - spec["time_s"]) <= 0.2]
+        band = "snr>=8" if r["drawn"][0]["k"] >= 8.0 else "snr6-8" if r["drawn"][0]["k"] >= 6.0 else "snr<6"
+        found.setdefault(band, []).append(bool(hits))
+        if hits:
+            dt_err.append(hits[0]["time_s"] - spec["time_s"])
+            z += list((np.array(hits[0]["angular_momentum_n_m_s"]) - spec["angular_momentum_n_m_s"])
+                      / np.array(hits[0]["angular_momentum_sigma_n_m_s"]))
+    for band, hits in sorted(found.items()):
+        out[f"impulse_found_{band}"] = f"{sum(hits)}/{len(hits)}"
+    strong = found.get("snr>=8", [])
+    out["impulse_found_snr>=8_fraction"] = float(np.mean(strong)) if strong else None
+    out["impulse_time_error_max_s"] = float(np.max(np.abs(dt_err))) if dt_err else None
+    out["impulse_L_z_std"] = float(np.std(z)) if len(z) > 1 else None
+    out["impulse_explained"] = sum(not r["verdict"]["unexplained"] for r in rows)
+    out["impulse_with_a_catalog_name"] = sum(bool(_physical(r["accepted"])) for r in rows)
+    return out
+
+
 #: Multi-parameter effects (issue 24: one effect, several parameters): (family, variant suffixes of one
 #: GRS or axis set). The variants' specs of one effect are merged into one spec (vectors add) where the
 #: effect takes a vector, else injected side by side (a drift of several channels).
@@ -384,11 +441,12 @@ def run_one(args: tuple[dict, str, float]) -> dict:
             "corrected": {k: result.corrected[k] for k in ("g_angular", "g_angular_sigma_relative", "com_offset_m",
                                                             "com_offset_sigma_m")} if result.corrected else None}
     rejected = [{"key": e.key, "reason": e.rejected} for e in result.effects if e.rejected]
+    impulses = result.impulses.get("events", []) if result.status == "ok" else []
     return {"index": entry["index"], "kind": entry["kind"], "drawn": entry["effects"], "private": entry.get("private"),
             "exclude": entry.get("exclude"), "fidelity": entry.get("fidelity", "standard"),
             "timing_truth": _reduced(data_config, effects), "status": result.status, "verdict": result.verdict,
             "accepted": effects_out, "rejected": rejected, "seconds": elapsed, "t0_s": float(inp.t_s[0]),
-            "calibration": calibration}
+            "calibration": calibration, "impulses": impulses}
 
 
 def _reduced(config: object, effects: list) -> dict[str, float]:
@@ -539,6 +597,7 @@ def score(results: list[dict], sigma_e: float) -> dict:
     table["single_top1_alias_aware_by_family"] = per_family
     table.update(onset_scores(results))
     table.update(transient_scores(results))
+    table.update(impulse_scores(results))
     table.update(multi_scores(results))
     table.update(corrected_scores(results))
     table["seconds_median"] = float(np.median([r["seconds"] for r in results]))
@@ -653,6 +712,8 @@ def main() -> int:
                         help="out-of-catalog sets per fidelity (default 15 %%, at least 3)")
     parser.add_argument("--pairs", type=int, default=None,
                         help="two-effect sets per fidelity (default 15 %%, at least 3)")
+    parser.add_argument("--impulses", type=int, default=0,
+                        help="impulse sets (a momentum kick, SNR 4..16) per fidelity, added to --sets (default 0)")
     parser.add_argument("--transients", type=int, default=0,
                         help="transient sets (a torque pulse) per fidelity, added to --sets (default 0)")
     parser.add_argument("--multi", type=int, default=0,
@@ -687,6 +748,9 @@ def main() -> int:
     if args.transients:
         plan += transient_plan(args.transients, args.seed, model, args.duration_s, "standard")
         plan += transient_plan(args.transients, args.seed + 1, model, args.duration_s, "reference")
+    if args.impulses:
+        plan += impulse_plan(args.impulses, args.seed, model, args.duration_s, "standard")
+        plan += impulse_plan(args.impulses, args.seed + 1, model, args.duration_s, "reference")
     if args.multi:
         plan += multi_plan(args.multi, args.seed, sigmas, model, "standard")
         plan += multi_plan(args.multi, args.seed + 1, sigmas, model, "reference")
@@ -764,6 +828,10 @@ def main() -> int:
                       table["onset_drawn_z_std"] is not None and 0.8 <= table["onset_drawn_z_std"] <= 1.25))
         goals.append((f"{name}: transient unexplained with a window holding it >= 90 %", table["transient_sets"],
                       table["transient_window_contains_it"] >= 0.9 * max(table["transient_sets"], 1)))
+        goals.append((f"{name}: impulses of SNR >= 8 found within 0.2 s >= 90 %", table["impulse_sets"],
+                      (table["impulse_found_snr>=8_fraction"] or 0.0) >= 0.9))
+        goals.append((f"{name}: clean sets with a reported impulse <= 5 %", table["clean_sets"],
+                      table["clean_with_an_impulse"] <= 0.05))
         goals.append((f"{name}: multi-parameter effect named as its family alone >= 90 %", table["multi_sets"],
                       table["multi_named_family_only"] >= 0.9 * max(table["multi_sets"], 1)))
         goals.append((f"{name}: corrected G, d within 2 sigma where biased >= 90 %",

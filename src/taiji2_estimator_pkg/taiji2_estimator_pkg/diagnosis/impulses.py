@@ -13,9 +13,10 @@ torque noise and GRS angular readout noise, both white at 10 Hz):
 
 - the template of axis a is the chain's impulse response h_a (the inverse DFT of the fitted R(f); one
   sample where R = 1); the matched filter ``c_a(k) = sum_j h_a(j) r_a(k + j)`` estimates the
-  per-sample amplitude ``A_a(k) = c_a(k) / E_aa`` (``E_ab = sum_j h_a(j) h_b(j)``) with covariance
-  ``C_ab E_ab / (E_aa E_bb)``, C the robust 3x3 covariance of the residual (rows beyond 5 sigma of
-  any axis left out);
+  per-sample amplitude ``A_a(k) = c_a(k) / E_aa`` (``E_ab = sum_j h_a(j) h_b(j)``), whose 3x3
+  covariance is taken from the amplitudes of the searched samples themselves, robustly (rows beyond
+  5 sigma of any axis left out): for white noise it is ``C_ab E_ab / (E_aa E_bb)``, and where the
+  readout chain colours the noise (an anti-alias filter correlates neighbouring samples) it stays right;
 - the statistic ``T(k) = A(k)^T cov(A)^-1 A(k)`` is chi-square with 3 degrees of freedom without an
   impulse, ``SNR = sqrt(T)``; an impulse is reported where T exceeds the Bonferroni threshold
   ``chi2.isf(alpha / N, 3)`` over the N samples searched (alpha = :data:`FALSE_ALARM_PER_RECORD`:
@@ -193,8 +194,10 @@ def detect_impulses(residual: np.ndarray, response: ResponseFit | None, model: N
     energy = kernel @ kernel.T  # E_ab
     c = np.stack([np.correlate(torque[:, a], kernel[a], mode="same") for a in range(3)], axis=1)
     amplitude = c / np.diag(energy)
-    cov_r = _robust_cov(torque[keep])
-    cov_a = cov_r * energy / np.outer(np.diag(energy), np.diag(energy))
+    # the amplitudes' covariance from the amplitudes themselves (robustly): exact for white noise, where it is
+    # C_ab E_ab / (E_aa E_bb), and still right where the chain colours the noise (an anti-alias filter
+    # correlates neighbouring samples, which the white formula would take for signal)
+    cov_a = _robust_cov(amplitude[keep])
     info = np.linalg.inv(cov_a)
     statistic = np.einsum("ka,ab,kb->k", amplitude, info, amplitude)
     searched = int(np.count_nonzero(keep))
