@@ -146,10 +146,14 @@ def _level(level: Any) -> int:
     return level[0] if isinstance(level, (bytes, bytearray)) else int(level)
 
 
-def experiment_verdict(plan: ExperimentPlan, table: Any, layout: str, diagnostics: dict[str, Any]) -> Any:
+def experiment_verdict(plan: ExperimentPlan, table: Any, layout: str, diagnostics: dict[str, Any],
+                       not_as_planned: str = "") -> Any:
     """The verdict of a finished run: its estimates against the requirements and the bound.
 
     ``diagnostics``: the latest ``/diagnostics`` status of every name (DiagnosticStatus messages).
+    ``not_as_planned``: why the flown maneuver differs from the plan (activities refused onboard); the
+    plan's bound then does not apply, and the run is judged on the 1-sigma alone, as ``taiji2 calibrate``
+    judges a recording.
     """
     import json
 
@@ -159,9 +163,10 @@ def experiment_verdict(plan: ExperimentPlan, table: Any, layout: str, diagnostic
     from taiji2_estimator_pkg.verdict import RangeCheck, judge
 
     problem = DesignProblem(plan.config.to_dict())
-    bound = requirement_ratios(_bound(problem, plan))
+    bound = None if not_as_planned else requirement_ratios(_bound(problem, plan))
     design_peak = float(np.max(problem.usage(plan.maneuver, min(plan.duration_s, _FULL_BOUND_MAX_S)).range_fraction))
-    warnings = []
+    warnings = [f"the flown maneuver is not the plan ({not_as_planned}): judged on the 1-sigma alone, without the "
+                "plan's Cramer-Rao bound"] if not_as_planned else []
     range_check = None
     for name, status in sorted(diagnostics.items()):
         values = {kv.key: kv.value for kv in status.values}

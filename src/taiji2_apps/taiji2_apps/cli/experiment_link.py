@@ -436,7 +436,14 @@ def _report(args: argparse.Namespace, plan: Any, model: Any, link_seed: int, mon
 
     final = next(rec for rec in reversed(monitor.reception) if rec["end_of_data"])
     table = EstimateTable.from_messages(monitor.latest, layout=args.layout)
-    verdict = experiment_verdict(plan, table, args.layout, monitor.diagnostics)
+    commanding = commanding_summary(monitor.plan, [r for rec in monitor.reception
+                                                   for r in rec.get("command_reports", [])])
+    # activities refused onboard (late, or over capacity) or tables lost: the spacecraft held other torques than
+    # the plan's, whose bound then says nothing of this run (the estimates' 1-sigma still does)
+    not_as_planned = ", ".join(part for part in (
+        f"{commanding['refused_activities']} activities refused onboard" if commanding["refused_activities"] else "",
+        f"{len(commanding['lost_on_uplink'])} command tables lost" if commanding["lost_on_uplink"] else "") if part)
+    verdict = experiment_verdict(plan, table, args.layout, monitor.diagnostics, not_as_planned)
     status_of = {c.name: c.status for c in verdict.checks}
     results = table.to_dict()
     requirements = requirement_times(monitor.history, monitor.reception)
@@ -452,8 +459,7 @@ def _report(args: argparse.Namespace, plan: Any, model: Any, link_seed: int, mon
             "memory_peak_octets": report["memory_peak_octets"], "uplink": report["uplink"],
             "final_ground_time_s": final["ground_time_s"], "wall_s": elapsed,
             "speed_x_real_time": duration_s / elapsed}
-    link["commanding"] = commanding_summary(monitor.plan, [r for rec in monitor.reception
-                                                           for r in rec.get("command_reports", [])])
+    link["commanding"] = commanding
     if link["commanding"]["lost_on_uplink"]:
         faults["command table lost on uplink"] = ("TC[11,4] #" + ", #".join(
             map(str, link["commanding"]["lost_on_uplink"])) + " never acknowledged")
