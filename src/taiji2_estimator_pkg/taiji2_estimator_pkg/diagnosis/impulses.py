@@ -21,7 +21,9 @@ torque noise and GRS angular readout noise, both white at 10 Hz):
   impulse, ``SNR = sqrt(T)``; an impulse is reported where T exceeds the Bonferroni threshold
   ``chi2.isf(alpha / N, 3)`` over the N samples searched (alpha = :data:`FALSE_ALARM_PER_RECORD`:
   at most that probability of a reported impulse in a record of pure noise), strongest first, its
-  neighbours (the template's support) then left out;
+  neighbours (the template's support) then left out; more than :data:`MAX_IMPULSES` exceedances are not
+  impulses but a residual the noise model does not describe (a timing convention left unfitted): none is
+  reported, and the search says it stopped;
 - samples within :data:`EDGE_GUARD_S` of a change of the commanded torque are not searched (a
   timing convention fitted slightly off leaves its residual exactly there), nor the record's ends
   that the torque channel leaves out, nor epochs the input estimated (bridged gaps).
@@ -59,7 +61,7 @@ EDGE_GUARD_S = 0.5
 
 MAX_IMPULSES = 50
 """More exceedances than this are not a few impulses but a residual the noise model does not describe:
-the search stops and says so (``Impulses.abandoned``)."""
+the search stops, reports and fits none, and says so (``Impulses.abandoned``)."""
 
 _TORQUE = slice(CHANNELS.index("torque_x"), CHANNELS.index("torque_x") + 3)
 _LIN_COMMON = slice(CHANNELS.index("lin_common_x"), CHANNELS.index("lin_common_x") + 3)
@@ -111,12 +113,13 @@ class Impulses:
     threshold_snr: float
     samples_searched: int
     abandoned: bool = False
+    exceedances: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         """Report entry."""
         return {"events": [event.to_dict() for event in self.events], "threshold_snr": self.threshold_snr,
                 "samples_searched": self.samples_searched, "false_alarm_per_record": FALSE_ALARM_PER_RECORD,
-                "abandoned": self.abandoned}
+                "abandoned": self.abandoned, "exceedances_when_abandoned": self.exceedances}
 
 
 def chain_kernel(response: ResponseFit | None, dt_s: float) -> np.ndarray:
@@ -207,15 +210,13 @@ def detect_impulses(residual: np.ndarray, response: ResponseFit | None, model: N
     cov_l = _robust_cov(linear[keep])
     phi = model.srp_decay
     events: list[Impulse] = []
-    abandoned = False
     while True:
         scores = np.where(open_, statistic, -np.inf)
         k = int(np.argmax(scores))
         if not scores[k] > threshold:
             break
-        if len(events) == MAX_IMPULSES:
-            abandoned = True
-            break
+        if len(events) == MAX_IMPULSES:  # not a few impulses: none of them is reported or fitted
+            return Impulses([], math.sqrt(threshold), searched, abandoned=True, exceedances=len(events) + 1)
         open_[max(0, k - 2 * _KERNEL_HALF):k + 2 * _KERNEL_HALF + 1] = False
         after = linear[k + 1] if k + 1 < linear.shape[0] else np.zeros(3)
         dv = dt * (linear[k] - phi * after) / (1.0 + phi * phi)
@@ -226,7 +227,7 @@ def detect_impulses(residual: np.ndarray, response: ResponseFit | None, model: N
             angular_momentum_cov=model.inertia_kg_m2 @ cov_a @ model.inertia_kg_m2.T * dt * dt,
             linear_impulse_n_s=model.mass_kg * dv,
             linear_impulse_cov=cov_l * (model.mass_kg * dt) ** 2 / (1.0 + phi * phi)))
-    return Impulses(events, math.sqrt(threshold), searched, abandoned)
+    return Impulses(events, math.sqrt(threshold), searched)
 
 
 def impulse_candidate(event: Impulse, model: NominalModel) -> Candidate:

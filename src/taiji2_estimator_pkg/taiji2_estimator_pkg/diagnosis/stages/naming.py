@@ -46,7 +46,7 @@ def _name_impulses(verdict: dict[str, Any], impulses: Impulses) -> None:
     they explain what they remove; a record of nothing else is "explained by" them, never "no significant gap"."""
     verdict["impulses"] = len(impulses.events)
     if impulses.abandoned:
-        verdict["summary"] += (f"; the impulse search stopped at {len(impulses.events)} events above SNR "
+        verdict["summary"] += (f"; the impulse search stopped at {impulses.exceedances} exceedances of SNR "
                                f"{impulses.threshold_snr:.1f}: the residual is not a few impulses in Gaussian noise")
     if not impulses.events:
         return
