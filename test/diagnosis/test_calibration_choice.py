@@ -30,3 +30,14 @@ def test_calibrate_is_the_one_to_use_and_the_difference_is_in_combined_sigma():
 def test_a_difference_beyond_three_sigma_is_named_as_a_bias_of_the_torque_channel():
     choice = calibration_choice(*_tables(CONSISTENT_SIGMA + 2.0))
     assert "biases the torque channel" in choice["why"]
+
+
+def test_named_effects_point_to_calibrate_with_the_extended_layout_and_the_corrected_calibration_has_its_caveats():
+    star, torque = _tables(0.5)
+    corrected = {**torque, "alias_uncertain": ["G.1.phi"]}
+    choice = calibration_choice(star, torque, corrected, {"effects": ["thruster_torque_gain"], "unexplained": False})
+    assert choice["use"] == "calibrate --config" and "--write-config" in choice["why"]
+    assert all(r["corrected"] is not None and r["corrected_sigma"] > 0 for r in choice["rows"])
+    assert any("alias" in c and "G.1.phi" in c for c in choice["caveats"])
+    unexplained = calibration_choice(star, torque, corrected, {"effects": ["com_drift"], "unexplained": True})
+    assert unexplained["use"] == "calibrate" and any("unexplained" in c for c in unexplained["caveats"])

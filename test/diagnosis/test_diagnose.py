@@ -87,6 +87,21 @@ def test_aliases_reported_for_torque_gain():
     assert top.accepted and {top.name, *[a.split("[")[0] for a in top.aliases]} >= {"thruster_torque_gain",
                                                                                      "inertia_error"}
     assert result.verdict["effects"][0] in ("thruster_torque_gain", "inertia_error")
+    # the corrected calibration under each alias, and which parameters the choice leaves uncertain: both
+    # corrections within 4 of their sigma of the truth (seeded; 12 parameters each), the spread reported
+    corrected = result.corrected
+    alternatives = corrected["alias_alternatives"]
+    assert {a["alias"].split("[")[0] for a in alternatives} & {"thruster_torque_gain", "inertia_error"}, alternatives
+    assert len(corrected["alias_spread_sigma"]) == 12 and isinstance(corrected["alias_uncertain"], list)
+    sensors = config.grs.sensors
+    g_true = np.array([s.angular_scale_factors for s in sensors])
+    d_true = np.array([s.com_offset_m for s in sensors])
+    sigma_g = np.array(corrected["g_angular_sigma_relative"])
+    sigma_d = np.array(corrected["com_offset_sigma_m"])
+    for calibration in (corrected, *alternatives):
+        z_g = (np.array(calibration["g_angular"]) / g_true - 1.0) / sigma_g
+        z_d = (np.array(calibration["com_offset_m"]) - d_true) / sigma_d
+        assert np.all(np.abs(z_g) < 4.0) and np.all(np.abs(z_d) < 4.0), (calibration.get("alias"), z_g, z_d)
 
 
 def test_effect_outside_the_candidates_is_unexplained():

@@ -93,15 +93,17 @@ def _load_bag(path: Path, sample_rate_hz: float, correlation: Any = None) -> tup
     return inp, raw
 
 
-def _calibration_choice(raw: Any, config: Any, torque_channel: dict[str, Any]) -> dict[str, Any]:
-    """``taiji2 calibrate``'s result on the same data beside the diagnosis's torque-channel calibration."""
+def _calibration_choice(raw: Any, config: Any, result: Any) -> dict[str, Any]:
+    """``taiji2 calibrate``'s result on the same data beside the diagnosis's torque-channel calibration and its
+    corrected calibration."""
     from taiji2_estimator_pkg.calibration import align_streams, calibrate
     from taiji2_estimator_pkg.core.instrument import InstrumentModel
     from taiji2_estimator_pkg.diagnosis.calibration_choice import calibration_choice
 
     grs = {gid: (raw.grs(gid).stamp_ns, raw.grs(gid).voltages_v) for gid in (1, 2)}
     record = align_streams(raw.star_tracker.stamp_ns, raw.star_tracker.quat_xyzw, grs, config.sample_rate_hz)
-    return calibration_choice(calibrate(record, InstrumentModel.from_layout(config)), torque_channel)
+    return calibration_choice(calibrate(record, InstrumentModel.from_layout(config)), result.calibration,
+                              result.corrected, result.verdict)
 
 
 def _share(value: float | None) -> str:
@@ -165,7 +167,7 @@ def _main(args: argparse.Namespace) -> int:
     choice = None
     if raw is not None and result.status == "ok":  # the raw streams' own calibration, for the report's choice
         progress("the star-tracker calibration (taiji2 calibrate) of the same data, for the report's choice")
-        choice = _calibration_choice(raw, config, result.calibration)
+        choice = _calibration_choice(raw, config, result)
     files = write_report(result, args.out, plots=not args.no_plots, choice=choice)
     progress(f"wrote {', '.join(str(p) for p in files.values())}")
     if args.write_config:

@@ -23,8 +23,9 @@ CONSISTENT_SIGMA = 3.0
 _G = ("G_phi", "G_theta", "G_psi")
 
 
-def calibration_choice(star_tracker: Any, torque_channel: dict[str, Any]) -> dict[str, Any]:
-    """The two calibrations side by side, the one to use and why.
+def calibration_choice(star_tracker: Any, torque_channel: dict[str, Any], corrected: dict[str, Any] | None = None,
+                       verdict: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The calibrations side by side, the one to use and why.
 
     Parameters
     ----------
@@ -33,12 +34,18 @@ def calibration_choice(star_tracker: Any, torque_channel: dict[str, Any]) -> dic
     torque_channel : dict
         The diagnosis's nominal calibration (``DiagnosisResult.calibration``: ``g_angular``,
         ``g_angular_sigma_relative``, ``com_offset_m``, ``com_offset_sigma_m``).
+    corrected : dict, optional
+        The diagnosis's corrected calibration (``DiagnosisResult.corrected``: the torque channel under the
+        model extended with the named effects), added to the rows with its caveats.
+    verdict : dict, optional
+        The diagnosis's verdict (named effects, unexplained).
 
     Returns
     -------
     dict
-        ``use`` (``"calibrate"``), ``why``, ``rows`` (per GRS and parameter: both values and sigmas and the
-        difference in combined sigma) and ``max_difference_sigma``.
+        ``use`` (``"calibrate"``, or ``"calibrate --config"`` where effects are named), ``why``, ``rows`` (per
+        GRS and parameter: the values and sigmas and the difference in combined sigma), ``caveats`` of the
+        corrected calibration and ``max_difference_sigma``.
     """
     rows = []
     for index, result in enumerate(star_tracker.grs):
@@ -50,14 +57,23 @@ def calibration_choice(star_tracker: Any, torque_channel: dict[str, Any]) -> dic
         t_g_sigma = np.asarray(torque_channel["g_angular_sigma_relative"][index], dtype=float) * np.abs(t_g)
         t_d = np.asarray(torque_channel["com_offset_m"][index], dtype=float)
         t_d_sigma = np.asarray(torque_channel["com_offset_sigma_m"][index], dtype=float)
-        for names, ours, our_sigma, theirs, their_sigma in ((_G, g, g_sigma, t_g, t_g_sigma),
-                                                            (("d_x", "d_y", "d_z"), d, d_sigma, t_d, t_d_sigma)):
+        c_g = c_g_sigma = c_d = c_d_sigma = np.full(3, np.nan)
+        if corrected:
+            c_g = np.asarray(corrected["g_angular"][index], dtype=float)
+            c_g_sigma = np.asarray(corrected["g_angular_sigma_relative"][index], dtype=float) * np.abs(c_g)
+            c_d = np.asarray(corrected["com_offset_m"][index], dtype=float)
+            c_d_sigma = np.asarray(corrected["com_offset_sigma_m"][index], dtype=float)
+        for names, ours, our_sigma, theirs, their_sigma, fixed, fixed_sigma in (
+                (_G, g, g_sigma, t_g, t_g_sigma, c_g, c_g_sigma),
+                (("d_x", "d_y", "d_z"), d, d_sigma, t_d, t_d_sigma, c_d, c_d_sigma)):
             for k, name in enumerate(names):
                 combined = float(np.hypot(our_sigma[k], their_sigma[k]))
                 rows.append({"grs": result.grs_id, "parameter": name, "calibrate": float(ours[k]),
                              "calibrate_sigma": float(our_sigma[k]), "torque_channel": float(theirs[k]),
                              "torque_channel_sigma": float(their_sigma[k]),
-                             "difference_sigma": float((theirs[k] - ours[k]) / combined) if combined > 0 else None})
+                             "difference_sigma": float((theirs[k] - ours[k]) / combined) if combined > 0 else None,
+                             "corrected": None if np.isnan(fixed[k]) else float(fixed[k]),
+                             "corrected_sigma": None if np.isnan(fixed_sigma[k]) else float(fixed_sigma[k])})
     differences = [abs(r["difference_sigma"]) for r in rows if r["difference_sigma"] is not None
                    and np.isfinite(r["difference_sigma"])]
     largest = max(differences, default=float("nan"))
@@ -70,4 +86,19 @@ def calibration_choice(star_tracker: Any, torque_channel: dict[str, Any]) -> dic
                 "gain) or an effect named in this report biases the torque channel.")
     elif np.isfinite(largest):
         why += f" Here they agree within {largest:.1f} combined sigma."
-    return {"use": "calibrate", "why": why, "rows": rows, "max_difference_sigma": largest}
+    use, caveats = "calibrate", []
+    named = [name for name in (verdict or {}).get("effects", []) if name != "impulse"]
+    if corrected:
+        caveats.append("the corrected calibration is the torque channel's under the model extended with the named "
+                       "effects (" + (", ".join(named) or "impulses only") + "): it trusts the nominal inertia too")
+        if corrected.get("alias_uncertain"):
+            caveats.append("left uncertain by an alias of a named effect (the corrected value holds for the named "
+                           "effect only): " + ", ".join(corrected["alias_uncertain"]))
+        if (verdict or {}).get("unexplained"):
+            caveats.append("a gap remains unexplained: no correction covers it")
+    if named and not (verdict or {}).get("unexplained"):
+        use = "calibrate --config"
+        why += (" Effects are named here: take taiji2 calibrate BAG --config FILE, FILE written by taiji2 diagnose "
+                "BAG --write-config FILE (the star-tracker method with the named effects removed from the data); "
+                "the corrected calibration beside it is its check.")
+    return {"use": use, "why": why, "rows": rows, "caveats": caveats, "max_difference_sigma": largest}

@@ -45,14 +45,19 @@ def _fmt(value: float | None, digits: int = 3) -> str:
 
 def _choice_lines(choice: dict[str, Any]) -> list[str]:
     """The report section saying which calibration to use, the two side by side."""
-    lines = ["## Which calibration to use", "", "**Use `taiji2 calibrate`'s result** (the star-tracker method). "
-             + choice["why"], "",
+    head = "**Use `taiji2 calibrate`'s result** (the star-tracker method)"
+    if choice["use"] == "calibrate --config":
+        head = "**Use `taiji2 calibrate --config FILE`'s result** (the star-tracker method, the named effects removed)"
+    lines = ["## Which calibration to use", "", f"{head}. " + choice["why"], "",
              "| GRS | parameter | `taiji2 calibrate` | 1-sigma | torque channel (trusts the nominal inertia) | 1-sigma "
-             "| difference [combined sigma] |", "|---|---|---|---|---|---|---|"]
+             "| difference [combined sigma] | corrected (named effects modelled) | 1-sigma |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in choice["rows"]:
         diff = "-" if r["difference_sigma"] is None else f"{r['difference_sigma']:+.2f}"
         lines.append(f"| {r['grs']} | {r['parameter']} | {r['calibrate']:.6g} | {r['calibrate_sigma']:.3g} | "
-                     f"{r['torque_channel']:.6g} | {r['torque_channel_sigma']:.3g} | {diff} |")
+                     f"{r['torque_channel']:.6g} | {r['torque_channel_sigma']:.3g} | {diff} | "
+                     f"{_fmt(r.get('corrected'), 6)} | {_fmt(r.get('corrected_sigma'))} |")
+    lines += [""] + [f"- {caveat}" for caveat in choice.get("caveats", [])]
     return [*lines, ""]
 
 
@@ -194,6 +199,15 @@ def _markdown(result: DiagnosisResult, files: list[str], choice: dict[str, Any] 
                              f"{corrected['com_offset_sigma_m'][grs][i] * 1e6:.1f} um | "
                              f"{corrected['d_shift_sigma'][grs][i]:+.2f} |")
         lines += ["", "Covariance (12 x 12, relative G then d): report.json `corrected_calibration.covariance`."]
+        for alternative in corrected.get("alias_alternatives", []):
+            worst = max(abs(x) for x in alternative["shift_from_corrected_sigma"])
+            lines += ["", f"Alias: the data cannot tell `{alternative['named']}` from `{alternative['alias']}`; "
+                          f"corrected with the latter, G and d move by up to {worst:.2f} sigma "
+                          "(report.json `corrected_calibration.alias_alternatives`)."]
+        if corrected.get("alias_uncertain"):
+            lines += ["", "**Left uncertain by the alias** (moved by more than 1 sigma between the aliases; the "
+                          "corrected value holds for the named effect only): "
+                      + ", ".join(corrected["alias_uncertain"]) + "."]
     lines += _impulse_lines(result.impulses)
     remaining = result.verdict.get("remaining", [])
     lines += ["", "## Remaining gap", ""]

@@ -66,11 +66,62 @@ def correct_calibration(inp: DiagnosisInput, layout: NominalModel | SimConfig, n
                                       nominal.calibration, start.t_mid, max(2, options.calibration_iterations), say,
                                       free)
     corrected["effects"] = specs
+    corrected.update(_alias_alternatives(inp, start, reports, by_key, [*start.fixed, *held], free, timing_change,
+                                         nominal.calibration, corrected, max(2, options.calibration_iterations), say))
     extended = None
     if isinstance(layout, SimConfig):
         extended = extended_layout(layout.to_dict(), [s for s in specs if "timing" in s],
                                    [s for s in specs if "timing" not in s])
     return Corrected(corrected, extended)
+
+
+#: aliases of one named effect whose corrected calibration is computed (the strongest first)
+ALIASES_PER_EFFECT = 2
+
+#: a parameter whose corrected value moves by more than this many of its sigmas between aliases is left
+#: uncertain by the alias
+ALIAS_UNCERTAIN_SIGMA = 1.0
+
+
+def _alias_alternatives(inp: DiagnosisInput, start: Any, reports: Sequence[EffectReport],
+                        by_key: dict[str, Candidate], held: Sequence[Fixed], free: Sequence[Fixed],
+                        timing_change: tuple[float, float, float], nominal: dict[str, Any],
+                        corrected: dict[str, Any], iterations: int, say: Progress) -> dict[str, Any]:
+    """The corrected calibration with each named physical effect replaced by each of its physical aliases (the
+    data cannot tell them apart: a torque gain and an inertia error on one axis), and which G and d the choice
+    moves by more than :data:`ALIAS_UNCERTAIN_SIGMA` of their sigma (``alias_uncertain``): there the corrected
+    value holds for the named alias only, and the spread says by how much the others differ."""
+    alternatives = []
+    sigma = np.concatenate((np.ravel(corrected["g_angular_sigma_relative"]), np.ravel(corrected["com_offset_sigma_m"])))
+    base_g, base_d = np.asarray(corrected["g_angular"]), np.asarray(corrected["com_offset_m"])
+    for report in reports:
+        if not report.accepted or report.name in TIMING_FAMILIES:
+            continue
+        index = next((i for i, entry in enumerate(free) if entry[0].key == report.key), None)
+        if index is None:
+            continue
+        aliases = [key for key in report.aliases if key in by_key and by_key[key].name not in TIMING_FAMILIES
+                   and key not in {entry[0].key for entry in free}][:ALIASES_PER_EFFECT]
+        for alias in aliases:
+            _, _, onset, t_ref = free[index]
+            other = by_key[alias]
+            swapped = list(free)
+            swapped[index] = (other, np.zeros(len(other.params)), onset, t_ref if other.onset_kind == "ramp" else None)
+            say(f"corrected calibration with {alias} in place of {report.key} (aliases)")
+            result = corrected_calibration(inp, start.model, start.settings, timing_change, held, nominal,
+                                           start.t_mid, iterations, say, swapped)
+            g, d = np.asarray(result["g_angular"]), np.asarray(result["com_offset_m"])
+            shift = np.concatenate(((g / base_g - 1.0).ravel(), (d - base_d).ravel())) / sigma
+            alternatives.append({"named": report.key, "alias": alias, "g_angular": result["g_angular"],
+                                 "com_offset_m": result["com_offset_m"],
+                                 "shift_from_corrected_sigma": shift.tolist()})
+    if not alternatives:
+        return {}
+    names = corrected["covariance_order"]
+    spread = np.max(np.abs([a["shift_from_corrected_sigma"] for a in alternatives]), axis=0)
+    return {"alias_alternatives": alternatives, "alias_spread_sigma": spread.tolist(),
+            "alias_uncertain": [name.split(" ")[0] for name, value in zip(names, spread, strict=True)
+                                if value > ALIAS_UNCERTAIN_SIGMA]}
 
 
 def complete_cross_talk(free: Sequence[Fixed], candidates: dict[str, Candidate]) -> list[Fixed]:
