@@ -15,7 +15,7 @@ from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_bat
 from contract_bags import simulated_data, write_ground_segment_bag
 from support import run_taiji2
 
-DURATION_S = 2400.0
+DURATION_S = 1200.0  # 20 min: the cases are compared with phase 0 of the same noise draws, in its sigmas
 T0_NS = 1_700_000_000 * 10**9
 
 
@@ -57,7 +57,7 @@ def test_a_star_tracker_40_ms_after_the_grs_calibrates_like_phase_0(phase_0):
     assert np.max(np.abs(values - values_0) / sigma_0) < 0.3
     assert np.max(np.abs(sigma / sigma_0 - 1.0)) < 0.05
     # the offset is modelled, not ignored: without it G and d move ten times further (0.018 sigma against
-    # 0.001 sigma at 2400 s for seed 11)
+    # 0.001 sigma at 2400 s for seed 11; the test runs 1200 s)
     _, _, ignored, _ = _calibrate(out, st_ns, grs_ns, ignore_offset=True)
     assert np.max(np.abs(values - values_0) / sigma_0) < 0.2 * np.max(np.abs(ignored - values_0) / sigma_0)
 
@@ -79,8 +79,8 @@ def test_stamp_jitter_of_2_ms_rejects_nothing_and_changes_nothing_that_matters(p
 def test_a_star_tracker_entirely_refused_is_an_error_naming_it():
     out, _, grs_ns = _simulate(0.0)
     early = grs_ns - 3_600 * 10**9  # an hour before the GRS started: every sample precedes the first epoch
-    with pytest.raises(UndeterminedError, match=r"^star_tracker: every sample refused \(before_start 24000\)$"):
-        _calibrate(out, early[:24000], grs_ns)
+    with pytest.raises(UndeterminedError, match=r"^star_tracker: every sample refused \(before_start 12000\)$"):
+        _calibrate(out, early, grs_ns)
 
 
 def test_calibrate_exits_4_with_one_line_when_the_result_cannot_be_determined(tmp_path):
