@@ -1,6 +1,9 @@
 """One record (the whole run, or its training or held-out part): channels, spectra, normal equations.
 
 Also the calibration of the nominal model (Gauss-Newton on the nuisance columns only).
+
+Length (just over 600 lines): the record class and the calibration build the same columns, whitening and
+normal equations from one set of helpers (``column_fft``, ``fixed_change``); kept together for that reason.
 """
 
 from __future__ import annotations
