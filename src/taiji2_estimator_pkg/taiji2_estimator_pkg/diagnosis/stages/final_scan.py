@@ -17,6 +17,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
+from taiji2_estimator_pkg.diagnosis.dynamics import ResponseFit
 from taiji2_estimator_pkg.diagnosis.impulses import Impulses, detect_impulses, impulse_candidate, searchable
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.locations import Location
@@ -72,11 +73,12 @@ def final_scan(inp: DiagnosisInput, nominal: Nominal, where: Where, selection: S
             full.refine(candidate, [name for name in current if name not in names])
     _joint_timing(full, [c for c in accepted if isinstance(c, Candidate)], current)
     theta_final, cov_final, chi2_final = full.fit(current)
-    current, impulses = _impulses(inp, full, current, theta_final, say)
-    if impulses.events:
+    current, impulses, response = _impulses(inp, full, current, theta_final, say)
+    if impulses.events:  # refitted with the impulses' columns: the chain's response too
         theta_final, cov_final, chi2_final = full.fit(current)
+        response = full.response(current, theta_final)[1]
     say("scanning the residual with the accepted effects")
-    readout_response = full.response(current, theta_final)[1].to_dict()
+    readout_response = response.to_dict()
     after = scan(full, where.grid, inp.t_s, current, theta_final, full.kappa, options)
     remaining, verdict = _verdict(where.before, after, accepted, options)
     verdict.update({"chi2_nominal": nominal.chi2, "chi2_final": chi2_final})
@@ -85,8 +87,9 @@ def final_scan(inp: DiagnosisInput, nominal: Nominal, where: Where, selection: S
 
 
 def _impulses(inp: DiagnosisInput, full: Record, current: Sequence[str], theta: np.ndarray, say: Progress
-              ) -> tuple[list[str], Impulses]:
-    """Search the final residual for impulsive events; the columns of the final fit with theirs added."""
+              ) -> tuple[list[str], Impulses, ResponseFit]:
+    """Search the final residual for impulsive events; the columns of the final fit with theirs added, and the
+    chain's response fitted with the residual searched."""
     residual, response = full.response(current, theta)
     keep = searchable(inp.n, inp.torque_cmd_n_m, full.lin.torque_edges, inp.filled, full.model.dt_s)
     impulses = detect_impulses(residual, response, full.model, inp.t_s, keep)
@@ -96,7 +99,7 @@ def _impulses(inp: DiagnosisInput, full: Record, current: Sequence[str], theta: 
     if impulses.events:
         say(f"impulses: {len(impulses.events)} above SNR {impulses.threshold_snr:.2f} at "
             + ", ".join(f"{e.time_s:.1f} s" for e in impulses.events[:5]))
-    return columns, impulses
+    return columns, impulses, response
 
 
 def _verdict(before_scan: Scan, after_scan: Scan, accepted: Sequence[Candidate | NoiseCandidate],
