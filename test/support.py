@@ -88,3 +88,27 @@ def unclipped_readout_patch():
     patch.setattr(config, "_parse_grs", parse)
     assert config.load_config("type1").grs.readout_saturation is False
     return patch
+
+
+def calibration_z(calibration: dict, g_true, d_true):
+    """(12,) errors of G (relative) and d of a diagnosis calibration against the truth, in its own sigmas."""
+    import numpy as np
+
+    z_g = (np.asarray(calibration["g_angular"]) / np.asarray(g_true) - 1.0) / np.asarray(
+        calibration["g_angular_sigma_relative"])
+    z_d = (np.asarray(calibration["com_offset_m"]) - np.asarray(d_true)) / np.asarray(calibration["com_offset_sigma_m"])
+    return np.concatenate((np.ravel(z_g), np.ravel(z_d)))
+
+
+def assert_corrected_calibration(result, g_true, d_true, least_nominal_bias: float = 0.0) -> tuple[float, float]:
+    """Issue 39's rule for a diagnosis ``result``: the corrected calibration (the nominal one when nothing is
+    named) within 3 of its sigmas of the truth in every parameter and no further from it than the nominal one
+    + 1 sigma (worst parameter of each); the nominal at least ``least_nominal_bias`` sigma off (the effect biases
+    it). Returns (nominal, corrected) worst |z|."""
+    import numpy as np
+
+    nominal = float(np.max(np.abs(calibration_z(result.calibration, g_true, d_true))))
+    corrected = float(np.max(np.abs(calibration_z(result.corrected or result.calibration, g_true, d_true))))
+    assert nominal >= least_nominal_bias, (nominal, corrected)
+    assert corrected < 3.0 and corrected <= nominal + 1.0, (nominal, corrected)
+    return nominal, corrected

@@ -1,5 +1,10 @@
-"""The corrected calibration (stage 7, diagnosis/stages/corrected.py, extended.corrected_calibration) under
-the readout effects of a GRS (effect_catalog/readout.py): cross-talk, scale-factor drift, nonlinearity.
+"""The corrected calibration (stage 7, diagnosis/stages/corrected.py, extended.corrected_calibration) per
+effect family: the readout effects of a GRS (effect_catalog/readout.py: cross-talk, scale-factor drift,
+nonlinearity), the dynamics (effect_catalog/dynamics.py: torque gain, inertia error, force leakage, gravity
+gradient) and the test mass (effect_catalog/test_mass.py: stiffness). The timing family's corrected
+calibration is checked where the diagnosis of a timing effect is run (test_timing_diagnosis.py,
+test_diagnose.py); the impulse's in test_impulses.py; benchmarks/bench_corrected_calibration.py has every
+variant at 5-50 sigma of bias, both layouts, both fidelities, with and without an onset.
 
 Issue 39: a named cross-talk made the calibration worse (G 12 -> 78 sigma). The named effects were held at
 their fitted values and G re-fitted with G's conditional sigma; an electrode imbalance moves G by eta d / r
@@ -48,7 +53,7 @@ def _worst_z(config, calibration):
 def _assert_corrected(config, nominal, corrected, g_min=5.0):
     nominal_g, nominal_d = _worst_z(config, nominal)
     corrected_g, corrected_d = _worst_z(config, corrected)
-    assert nominal_g > g_min, (nominal_g, nominal_d)  # the effect biases the nominal G
+    assert max(nominal_g, nominal_d) > g_min, (nominal_g, nominal_d)  # the effect biases the nominal G or d
     assert corrected_g < 3.0 and corrected_d < 3.0, (nominal_g, nominal_d, corrected_g, corrected_d)
     assert corrected_g <= nominal_g + 1.0 and corrected_d <= nominal_d + 1.0, (nominal_g, nominal_d, corrected_g,
                                                                                corrected_d)
@@ -70,22 +75,32 @@ def test_named_part_of_a_cross_talk_corrects_the_calibration():
     assert {f"cross_coupling[grs1.{part}_{axis}]" for part in ("misalign", "imbalance") for axis in "xyz"} <= refitted
 
 
-# The corrected calibration alone, from a named value off by half the truth (a fitted magnitude as wrong as a
-# partial model makes it): 30 min, seed 7, a few seconds each. (effect, named fraction, least nominal bias of G
-# [sigma]); measured nominal -> corrected worst G: imbalance 27.5 -> 1.4, misalignment 6.9 -> 1.9, drift 5.8 -> 1.9,
-# nonlinearity 4.6 -> 1.9; held at the named value as before issue 39: 12.8, 3.6, 3.0, 11.0 (its series form holds
-# to k a_max ~ 0.2: k = 4e7 on phi already leaves 2.7 sigma re-fitted).
-_READOUT = [
+# The corrected calibration alone, from a named value off by half the truth (a fitted magnitude as wrong as
+# a partial model makes it): 30 min, seed 7, a few seconds each. (effect, named fraction, least nominal bias
+# of G or d [sigma]). Readout family, measured nominal -> corrected worst G: imbalance 27.5 -> 1.4,
+# misalignment 6.9 -> 1.9, drift 5.8 -> 1.9, nonlinearity 4.6 -> 1.9; held at the named value as before
+# issue 39: 12.8, 3.6, 3.0, 11.0 (the nonlinearity's series form holds to k a_max ~ 0.2: k = 4e7 on phi
+# already leaves 2.7 sigma re-fitted). Dynamics and test-mass families at magnitudes that bias G or d by
+# 5-30 sigma over 30 min. The stiffness model is first order in k (diagnosis/correction.py): at 2e-4 s^-2
+# its re-fitted value came out 5 % (12 sigma) high while G and d were corrected; 6e-5 keeps it within its
+# sigma. The gravity gradient is left out: its physical value biases nothing (a scale of 30 is needed for
+# 5 sigma in 1 h; there the attitude-free signature leaves G 4.5 sigma off).
+_NAMED = [
     ({"name": "cross_coupling", "grs": 1, "imbalance": [1e-3, 0, 0]}, 0.5, 5.0),
     ({"name": "cross_coupling", "grs": 2, "misalignment_rad": [5e-3, 0, 0]}, 0.5, 5.0),
     ({"name": "scale_factor_drift", "rate_per_s": 3e-6, "grs": 1, "axis": "z", "t_ref_s": 0.0}, 0.5, 5.0),
     ({"name": "readout_nonlinearity", "k": 3e7, "grs": 1, "readout": "theta"}, 0.5, 4.0),
+    ({"name": "thruster_torque_gain", "gain": 0.012, "axis": "y"}, 0.5, 5.0),
+    ({"name": "inertia_error", "relative": [0.012, 0.0, 0.0]}, 0.5, 5.0),
+    ({"name": "thruster_force_leakage", "leakage_per_m": (np.eye(3) * 1.3e-2).tolist()}, 0.5, 5.0),
+    ({"name": "tm_stiffness", "stiffness_s2": 6e-5, "grs": 1, "axis": "x"}, 0.5, 5.0),
 ]
 
 
-@pytest.mark.parametrize(("effect", "named_fraction", "g_min"), _READOUT,
-                         ids=["imbalance", "misalignment", "scale_factor_drift", "readout_nonlinearity"])
-def test_corrected_calibration_refits_a_readout_effect(effect, named_fraction, g_min):
+@pytest.mark.parametrize(("effect", "named_fraction", "g_min"), _NAMED,
+                         ids=["imbalance", "misalignment", "scale_factor_drift", "readout_nonlinearity",
+                              "thruster_torque_gain", "inertia_error", "thruster_force_leakage", "tm_stiffness"])
+def test_corrected_calibration_refits_a_named_effect(effect, named_fraction, g_min):
     """The named value re-fitted with G and d: G and d back at the truth, the effect within 3 sigma of its truth."""
     config, inp = _data([effect], HOUR // 2, seed=7)
     model = NominalModel.from_config(config)
@@ -95,7 +110,8 @@ def test_corrected_calibration_refits_a_readout_effect(effect, named_fraction, g
     g, d, sigma_g, sigma_d = calibrate(inp, model, settings, 4, quiet)
     nominal = {"g_angular": g, "g_angular_sigma_relative": sigma_g, "com_offset_m": d, "com_offset_sigma_m": sigma_d}
     named = dict(effect)
-    for key in ("imbalance", "misalignment_rad", "rate_per_s", "k"):
+    for key in ("imbalance", "misalignment_rad", "rate_per_s", "k", "gain", "relative", "leakage_per_m", "scale",
+                "stiffness_s2"):
         if key in named:
             named[key] = (named_fraction * np.asarray(named[key])).tolist()
     _, free = fixed_from_specs([named], model, settings)
@@ -104,4 +120,4 @@ def test_corrected_calibration_refits_a_readout_effect(effect, named_fraction, g
     _, truth = fixed_from_specs([effect], model, settings)
     for entry, (candidate, value, _, _) in zip(corrected["refitted"], truth, strict=True):
         assert entry["variant"] == candidate.key
-        assert abs(entry["values"][0] - value[0]) < 3.0 * entry["sigmas"][0], (entry, value)
+        assert np.all(np.abs(np.asarray(entry["values"]) - value) < 3.0 * np.asarray(entry["sigmas"])), (entry, value)

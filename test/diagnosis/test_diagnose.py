@@ -16,6 +16,8 @@ from taiji2_model.config import load_config
 from taiji2_model.effect_catalog import make_effect
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
+from support import assert_corrected_calibration
+
 try:
     import taiji2_estimator_pkg.diagnosis  # noqa: F401
 except ImportError:  # an editable install made before the package had modules
@@ -77,6 +79,8 @@ def test_other_effects_named_with_magnitude(effect, family, true, key):
     top = result.effects[0]
     assert result.verdict["effects"] == [family] and top.name == family
     assert abs(top.magnitude - true) < 3.0 * top.sigma
+    sensors = config.grs.sensors  # the corrected calibration (issue 39): within 3 sigma, not worse than nominal + 1
+    assert_corrected_calibration(result, [s.angular_scale_factors for s in sensors], [s.com_offset_m for s in sensors])
     assert top.shrink_heldout is not None and top.shrink_heldout > 0.0
 
 

@@ -26,7 +26,16 @@ from taiji2_model.effect_catalog import make_effect
 from taiji2_sim_pkg.core.reference import simulate_reference
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
+from support import assert_corrected_calibration
+
 HOUR = 36000
+
+
+def _assert_corrected(result, data_config):
+    """The timing family's corrected calibration (issue 39): the named timing folded into the model, G and d
+    re-calibrated within 3 sigma of the truth and no further from it than the nominal + 1 sigma."""
+    sensors = data_config.grs.sensors
+    assert_corrected_calibration(result, [s.angular_scale_factors for s in sensors], [s.com_offset_m for s in sensors])
 
 
 @pytest.fixture(scope="module")
@@ -47,6 +56,7 @@ def test_reference_latency_is_named_and_sized(latency_data):
     assert len(delay) == 1, result.verdict["summary"]
     assert abs(delay[0].magnitude - 0.1) < 3.0 * delay[0].sigma
     assert delay[0].sigma < 0.02
+    _assert_corrected(result, load_config("type1"))
 
 
 def test_reference_latency_configured_is_no_gap(latency_data):
@@ -78,6 +88,7 @@ def test_latency_and_lag_are_fitted_jointly():
     assert abs(lag.magnitude - 0.08) < 3.0 * lag.sigma
     assert all(loc["significance"] < 8.16 for loc in result.verdict["remaining"]
                if loc["channel"].startswith("torque")), result.verdict["remaining"]
+    _assert_corrected(result, data_config)
 
 
 def test_start_stamp_convention_is_a_grs_time_offset():
@@ -91,6 +102,7 @@ def test_start_stamp_convention_is_a_grs_time_offset():
     named = [e for e in result.effects if e.accepted]
     assert [e.name for e in named] == ["grs_time_offset"], result.verdict["summary"]
     assert abs(named[0].magnitude + 0.1) < 3.0 * named[0].sigma
+    _assert_corrected(result, data_config)
     # the same data diagnosed with the convention configured: nothing left
     assert diagnose(inp, data_config).verdict["summary"] == "no significant gap"
 
