@@ -27,6 +27,7 @@ from taiji2_estimator_pkg.diagnosis.extended import corrected_calibration, fixed
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 from taiji2_estimator_pkg.diagnosis.options import record_settings
 from taiji2_estimator_pkg.diagnosis.record import calibrate
+from taiji2_estimator_pkg.diagnosis.stages.corrected import CORRECTED_ITERATIONS, untrusted
 from taiji2_model.config import load_config
 from taiji2_model.effect_catalog import make_effect
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
@@ -121,3 +122,24 @@ def test_corrected_calibration_refits_a_named_effect(effect, named_fraction, g_m
     for entry, (candidate, value, _, _) in zip(corrected["refitted"], truth, strict=True):
         assert entry["variant"] == candidate.key
         assert np.all(np.abs(np.asarray(entry["values"]) - value) < 3.0 * np.asarray(entry["sigmas"])), (entry, value)
+
+
+def test_corrected_calibration_is_withheld_where_the_named_model_does_not_hold():
+    """A readout nonlinearity of k = 1e8 from 900 s (k a_max ~ 0.1 beyond the range of its series form, where
+    the diagnosis named it from its onset and the re-fit moved G ~85 sigma from the truth, the nominal being
+    4-7 sigma off: bench_corrected_calibration.py): the re-fit says why it cannot be trusted, and the stage
+    gives no corrected calibration (report: "Not given")."""
+    effect = {"name": "readout_nonlinearity", "k": 1e8, "grs": 1, "readout": "phi", "onset_s": 900.0}
+    config, inp = _data([effect], HOUR // 2, seed=7)
+    model = NominalModel.from_config(config)
+    settings = record_settings(DiagnosisOptions())
+    quiet = lambda message: None  # noqa: E731
+    g, d, sigma_g, sigma_d = calibrate(inp, model, settings, 4, quiet)
+    nominal = {"g_angular": g, "g_angular_sigma_relative": sigma_g, "com_offset_m": d, "com_offset_sigma_m": sigma_d}
+    _, free = fixed_from_specs([effect], model, settings)
+    t_mid = float(0.5 * (inp.t_s[0] + inp.t_s[-1]))
+    corrected = corrected_calibration(inp, model, settings, (0.0, 0.0, 0.0), [], nominal, t_mid,
+                                      CORRECTED_ITERATIONS, quiet, free)
+    assert untrusted(corrected, CORRECTED_ITERATIONS)
+    # and a converged re-fit within the model's range is trusted
+    assert not untrusted({"last_update_sigma": 0.01, "beyond_series_bound": []}, CORRECTED_ITERATIONS)

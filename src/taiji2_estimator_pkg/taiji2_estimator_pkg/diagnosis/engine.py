@@ -110,6 +110,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     result.location_threshold, result.locations_after = where.before.threshold, final.after.locations
     result.steps, result.effects, result.verdict, result.how_far = selection.steps, reports, verdict, how_far.how_far
     result.corrected, result.extended_layout = corrected.calibration, corrected.layout
+    result.corrected_withheld = corrected.withheld
     result.impulses = final.impulses.to_dict()
     result.plots = plot_data(calibrated, where, final, reports, options)
     result.timing_s = lap.total()

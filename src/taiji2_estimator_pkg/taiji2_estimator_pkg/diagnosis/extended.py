@@ -217,7 +217,9 @@ def corrected_calibration(inp: DiagnosisInput, model: NominalModel, settings: Re
         ``covariance`` (12 x 12 of the relative G (GRS1 phi, theta, psi, GRS2 ...) and d (GRS1 x, y,
         z, GRS2 ...), marginal over the re-fitted effects), ``g_shift_sigma`` (corrected / nominal - 1
         in corrected sigmas), ``d_shift_sigma``, ``timing`` (the extended model's reduced timing),
-        ``chi2``, ``dof``, ``refitted`` (variant key, onset, re-fitted values and sigmas of ``free``).
+        ``chi2``, ``dof``, ``refitted`` (variant key, onset, re-fitted values and sigmas of ``free``),
+        ``last_update_sigma`` (the Gauss-Newton's last largest update [sigma]) and ``beyond_series_bound``
+        (free effects whose value left the range of their series form).
     """
     extended = replace(model, delay_s=model.delay_s + timing[0], st_offset_s=model.st_offset_s + timing[1],
                        time_constant_s=max(model.time_constant_s + timing[2], 0.0))
@@ -239,6 +241,8 @@ def corrected_calibration(inp: DiagnosisInput, model: NominalModel, settings: Re
         "timing": {"delay_s": extended.delay_s, "st_offset_s": extended.st_offset_s,
                    "time_constant_s": extended.time_constant_s},
         "chi2": info.get("chi2"), "dof": info.get("dof"), "refitted": refitted,
+        "last_update_sigma": info.get("last_update_sigma"),
+        "beyond_series_bound": info.get("beyond_series_bound", []),
     }
 
 

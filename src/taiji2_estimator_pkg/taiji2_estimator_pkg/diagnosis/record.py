@@ -523,8 +523,10 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
     G and d are the joint estimate under the extended model and their sigmas are marginal over the
     effects (a G that an effect aliases with is as uncertain as that effect's magnitude makes it).
     ``info`` (if given) receives ``"cov"``, the (12, 12) covariance of (relative G, d) of the last
-    iteration, ``"chi2"``, ``"dof"`` and, with ``free``, ``"free_values"`` (the re-fitted values, one
-    array per entry) and ``"free_sigma"``.
+    iteration, ``"chi2"``, ``"dof"``, ``"last_update_sigma"`` (the last iteration's largest update in
+    sigmas: the fit has not converged where it is large) and, with ``free``, ``"free_values"`` (the
+    re-fitted values, one array per entry), ``"free_sigma"`` and ``"beyond_series_bound"`` (the free
+    effects whose value left the range where their series form holds).
 
     Returns
     -------
@@ -584,8 +586,15 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
         scale = np.concatenate((sig[:12], sig[len(names):]))
         change = float(np.max(np.abs(moved) / np.where(scale > 0, scale, 1.0)))
         progress(f"calibration iteration {iteration + 1}: largest update {change:.3g} sigma")
+        if info is not None:
+            info["last_update_sigma"] = change
         if change < 0.05:
             break
+    if info is not None and free:  # a series form holds only within its bound (the nonlinearity: k a_max ~ 0.2)
+        info["beyond_series_bound"] = [
+            entry[0].key for entry, value in zip(free, values, strict=True)
+            if entry[0].exact is None and entry[0].series is not None and entry[0].bound is not None
+            and abs(float(value[0])) > entry[0].bound(ctx)]
     return g, d, sigma_g, sigma_d
 
 

@@ -143,7 +143,10 @@ class DiagnosisResult:
     corrected : dict
         G and d re-calibrated under the nominal model extended with the named effects
         (:func:`.extended.corrected_calibration`), with their covariance and shift from the nominal
-        calibration in sigmas; empty when nothing is named.
+        calibration in sigmas; empty when nothing is named or when it is withheld.
+    corrected_withheld : str
+        Why the corrected calibration is withheld although effects are named (not converged, or an effect
+        beyond the range of its model: :func:`.stages.corrected.untrusted`); empty otherwise.
     extended_layout : dict or None
         The nominal layout extended with the named effects (``--write-config``).
     impulses : dict
@@ -167,6 +170,7 @@ class DiagnosisResult:
     timing_s: dict[str, float] = field(default_factory=dict)
     model: dict[str, Any] = field(default_factory=dict)
     corrected: dict[str, Any] = field(default_factory=dict)
+    corrected_withheld: str = ""
     extended_layout: dict[str, Any] | None = None
     impulses: dict[str, Any] = field(default_factory=dict)
 
@@ -184,6 +188,7 @@ class DiagnosisResult:
             "steps": self.steps,
             "calibration": self.calibration,
             "corrected_calibration": self.corrected,
+            "corrected_calibration_withheld": self.corrected_withheld,
             "impulses": self.impulses,
             "how_far": self.how_far,
             "inputs": self.inputs,

@@ -28,7 +28,7 @@ from taiji2_estimator_pkg.diagnosis.results import EffectReport
 from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
 from taiji2_model.config import SimConfig
 
-__all__ = ["Corrected", "complete_cross_talk", "correct_calibration"]
+__all__ = ["Corrected", "complete_cross_talk", "correct_calibration", "untrusted"]
 
 
 @dataclass(frozen=True)
@@ -38,6 +38,16 @@ class Corrected:
 
     calibration: dict[str, Any] = field(default_factory=dict)
     layout: dict[str, Any] | None = None
+    withheld: str = ""
+    """Why no corrected calibration is given although effects are named (empty: none withheld)."""
+
+
+#: the corrected calibration is withheld when the Gauss-Newton's last update moves a parameter by more than
+#: this many of its sigmas (not converged: the extended model is too far from linear there)
+CONVERGED_UPDATE_SIGMA = 0.5
+
+#: Gauss-Newton iterations of the corrected calibration at least (it stops once the updates are below 0.05 sigma)
+CORRECTED_ITERATIONS = 8
 
 
 def correct_calibration(inp: DiagnosisInput, layout: NominalModel | SimConfig, nominal: Nominal,
@@ -62,17 +72,35 @@ def correct_calibration(inp: DiagnosisInput, layout: NominalModel | SimConfig, n
     free += [(impulse_candidate(event, start.model),
               np.concatenate((event.angular_momentum_n_m_s, event.linear_impulse_n_s)), None, None)
              for event in events]
+    iterations = max(CORRECTED_ITERATIONS, options.calibration_iterations)
     corrected = corrected_calibration(inp, start.model, start.settings, timing_change, [*start.fixed, *held],
-                                      nominal.calibration, start.t_mid, max(2, options.calibration_iterations), say,
-                                      free)
+                                      nominal.calibration, start.t_mid, iterations, say, free)
     corrected["effects"] = specs
-    corrected.update(_alias_alternatives(inp, start, reports, by_key, [*start.fixed, *held], free, timing_change,
-                                         nominal.calibration, corrected, max(2, options.calibration_iterations), say))
     extended = None
     if isinstance(layout, SimConfig):
         extended = extended_layout(layout.to_dict(), [s for s in specs if "timing" in s],
                                    [s for s in specs if "timing" not in s])
+    withheld = untrusted(corrected, iterations)
+    if withheld:
+        say(f"corrected calibration withheld: {withheld}")
+        return Corrected({}, extended, withheld)
+    corrected.update(_alias_alternatives(inp, start, reports, by_key, [*start.fixed, *held], free, timing_change,
+                                         nominal.calibration, corrected, iterations, say))
     return Corrected(corrected, extended)
+
+
+def untrusted(corrected: dict[str, Any], iterations: int) -> str:
+    """Why a corrected calibration cannot be given (empty: it can): its Gauss-Newton has not converged, or a
+    re-fitted effect left the range where its series form holds. Either way its G and d are those of a
+    model that does not describe the data; a large readout nonlinearity named from its onset moved G by
+    ~85 of its sigmas from the truth while the nominal one was 4-7 sigma off (bench_corrected_calibration.py)."""
+    last = corrected.get("last_update_sigma")
+    if last is not None and last > CONVERGED_UPDATE_SIGMA:
+        return (f"the re-fit of G and d with the named effects did not converge (last update {last:.3g} sigma after "
+                f"{iterations} iterations): the named effects are too large for the extended model's linearisation")
+    if corrected.get("beyond_series_bound"):
+        return ("re-fitted beyond the range where their model holds: " + ", ".join(corrected["beyond_series_bound"]))
+    return ""
 
 
 #: aliases of one named effect whose corrected calibration is computed (the strongest first)
@@ -110,6 +138,9 @@ def _alias_alternatives(inp: DiagnosisInput, start: Any, reports: Sequence[Effec
             say(f"corrected calibration with {alias} in place of {report.key} (aliases)")
             result = corrected_calibration(inp, start.model, start.settings, timing_change, held, nominal,
                                            start.t_mid, iterations, say, swapped)
+            if untrusted(result, iterations):
+                say(f"  with {alias}: {untrusted(result, iterations)}; not reported")
+                continue
             g, d = np.asarray(result["g_angular"]), np.asarray(result["com_offset_m"])
             shift = np.concatenate(((g / base_g - 1.0).ravel(), (d - base_d).ravel())) / sigma
             alternatives.append({"named": report.key, "alias": alias, "g_angular": result["g_angular"],
