@@ -17,8 +17,9 @@ For every case of the plan (effect variant x layout x fidelity x onset x target 
    reports), and under each reported alias (``alias_alternatives``).
 
 Scores, per effect family and over all (the goals of issue 39): the biased parameters (nominal > 3 sigma
-from the truth) whose corrected value is within 3 sigma of it (goal >= 90 %); cases whose corrected worst
-|z| exceeds the nominal one by more than 1 sigma (goal 0); the named effect; "unexplained".
+from the truth) of the cases biased >= 5 sigma whose corrected value is within 3 sigma of it (goal >= 90 %);
+cases, biased or not, whose corrected worst |z| exceeds the nominal one by more than 1 sigma (goal 0); the
+named effect; "unexplained".
 The largest magnitudes are physical bounds: a scale of 3 on the gravity gradient (its value is physics, the
 scale an error of the model; a scale of ~30 would be needed to bias G 5 sigma in 1 h), timing effects up to
 0.45 s (the diagnosis's timing reach is 0.5 s: ``channels.TIMING_REACH_S``), a readout nonlinearity up to
@@ -162,7 +163,7 @@ def score(rows: list[dict]) -> dict:
     zn = np.concatenate([np.asarray(r["nominal_z"]) for r in biased]) if biased else np.zeros(0)
     zc = np.concatenate([np.asarray(r["corrected_z"]) for r in biased]) if biased else np.zeros(0)
     parameters = np.abs(zn) > 3.0
-    worse = [r for r in biased if np.max(np.abs(r["corrected_z"])) > np.max(np.abs(r["nominal_z"])) + 1.0]
+    worse = [r for r in rows if np.max(np.abs(r["corrected_z"])) > np.max(np.abs(r["nominal_z"])) + 1.0]  # any case
     return {"cases": len(rows), "biased_cases": len(biased), "biased_parameters": int(parameters.sum()),
             "within_3_sigma": float(np.mean(np.abs(zc[parameters]) <= 3.0)) if parameters.any() else None,
             "cases_all_within_3_sigma": int(sum(np.max(np.abs(r["corrected_z"])) <= 3.0 for r in biased)),
