@@ -64,7 +64,10 @@ def echo(node: object) -> None:
         cls = getattr(messages.taiji2_msgs, name)
         pong = node.create_publisher(cls, f"/interop/{name}/pong", _qos())
         node.create_subscription(cls, f"/interop/{name}/ping", pong.publish, _qos())
-    rclpy.spin(node)
+    # spin_once with a timeout until shutdown: SIGINT ends the loop at the next wake-up at the latest (once in
+    # CI, an echo in rclpy.spin(node) did not end within 60 s of SIGINT)
+    while rclpy.ok():
+        rclpy.spin_once(node, timeout_sec=0.1)
 
 
 def drive(node: object) -> int:

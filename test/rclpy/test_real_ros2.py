@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
@@ -16,8 +17,15 @@ ALL_EXECUTABLES = {"taiji2_sim_pkg spacecraft_sim", "taiji2_sim_pkg maneuver_com
 
 
 def _stop(proc) -> tuple[int, str]:
+    """SIGINT to the process group; a process still running 60 s later is killed and reported as hung
+    (status -9, its stderr so far), so that the test's assertion names it instead of a TimeoutExpired."""
     os.killpg(proc.pid, signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
+    try:
+        _, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        _, err = proc.communicate()
+        return -9, f"did not end within 60 s of SIGINT (killed); stderr: {err}"
     return proc.returncode, err
 
 
