@@ -182,12 +182,12 @@ def _markdown(result: DiagnosisResult, files: list[str], choice: dict[str, Any] 
                              f"{row['kind']} | {row['gap_nominal']:.3f} | "
                              + " | ".join(f"{a['gap']:.3f}" for a in row["after"]) + " |")
     corrected = result.corrected
+    heading = "## Corrected calibration (the nominal model extended with the named effects)"
     if result.corrected_withheld:
-        lines += ["", "## Corrected calibration (the nominal model extended with the named effects)", "",
-                  f"**Not given**: {result.corrected_withheld}. Use the star-tracker calibration (`taiji2 "
-                  "calibrate`), and model the named effects before trusting a correction."]
+        lines += ["", heading, "", f"**Not given**: {result.corrected_withheld}. Use the star-tracker calibration "
+                  "(`taiji2 calibrate`), and model the named effects before trusting a correction."]
     if corrected:
-        lines += ["", "## Corrected calibration (the nominal model extended with the named effects)", "",
+        lines += ["", heading, "",
                   f"Extended timing: {corrected['timing']}; effects: {corrected.get('effects')}", "",
                   "| GRS | parameter | nominal | corrected | sigma | shift [sigma] |", "|---|---|---|---|---|---|"]
         nominal_g, nominal_d = cal["g_angular"], cal["com_offset_m"]

@@ -138,8 +138,9 @@ def _alias_alternatives(inp: DiagnosisInput, start: Any, reports: Sequence[Effec
             say(f"corrected calibration with {alias} in place of {report.key} (aliases)")
             result = corrected_calibration(inp, start.model, start.settings, timing_change, held, nominal,
                                            start.t_mid, iterations, say, swapped)
-            if untrusted(result, iterations):
-                say(f"  with {alias}: {untrusted(result, iterations)}; not reported")
+            reason = untrusted(result, iterations)
+            if reason:
+                say(f"  with {alias}: {reason}; not reported")
                 continue
             g, d = np.asarray(result["g_angular"]), np.asarray(result["com_offset_m"])
             shift = np.concatenate(((g / base_g - 1.0).ravel(), (d - base_d).ravel())) / sigma
