@@ -32,6 +32,8 @@ from taiji2_model.config import load_config
 from taiji2_model.effect_catalog import make_effect
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
+from support import calibration_z
+
 HOUR = 36000
 
 
@@ -44,11 +46,9 @@ def _data(effects, n, seed):
 
 def _worst_z(config, calibration):
     """Worst |error| / sigma of G and of d against the layout's truth."""
-    g_true = np.array([s.angular_scale_factors for s in config.grs.sensors])
-    d_true = np.array([s.com_offset_m for s in config.grs.sensors])
-    z_g = (np.asarray(calibration["g_angular"]) / g_true - 1.0) / np.asarray(calibration["g_angular_sigma_relative"])
-    z_d = (np.asarray(calibration["com_offset_m"]) - d_true) / np.asarray(calibration["com_offset_sigma_m"])
-    return float(np.max(np.abs(z_g))), float(np.max(np.abs(z_d)))
+    z = calibration_z(calibration, [s.angular_scale_factors for s in config.grs.sensors],
+                      [s.com_offset_m for s in config.grs.sensors])
+    return float(np.max(np.abs(z[:6]))), float(np.max(np.abs(z[6:])))
 
 
 def _assert_corrected(config, nominal, corrected, g_min=5.0):
