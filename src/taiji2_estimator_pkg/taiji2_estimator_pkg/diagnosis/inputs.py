@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from taiji2_estimator_pkg.core.attitude import quat_conjugate, quat_multiply, rotvec_from_quat
+from taiji2_estimator_pkg.diagnosis.angular_gaps import angular_gap_weight
 from taiji2_estimator_pkg.epochs import GRID_TOLERANCE, UndeterminedError, circular_offset, grid_streams
 
 __all__ = ["MAX_BRIDGE_SAMPLES", "DiagnosisInput", "InputError", "align_streams", "commands_on_grid",
@@ -81,6 +82,14 @@ class DiagnosisInput:
         (n,) True on the epochs that hold an estimate, not a received value, in some stream: a bridged
         sample, or a command lost where it changed (:func:`_locate_lost_changes`). The fits use them
         (one contiguous grid); the location scan treats them as missing (:mod:`.locations`). None: none.
+    angular_gap_weight : numpy.ndarray or None
+        (n,) the angular acceleration that neither GRS measured, per epoch, in units of one epoch's white
+        noise (:func:`.angular_gaps.angular_gap_weight`); the noise model adds its mean
+        (:class:`.spectral.NoiseSpectrum`). None: every bridged epoch had a GRS sample.
+    command_doubt : numpy.ndarray or None
+        (c, 5) per command change lost inside a gap of the GRS and placed in its middle
+        (:func:`_locate_lost_changes`): epoch, torque step x, y, z [N m], variance of its placement
+        [epochs^2]; the noise model adds what the misplacement leaves (:mod:`.angular_gaps`). None: none.
     """
 
     t_s: np.ndarray
@@ -92,6 +101,8 @@ class DiagnosisInput:
     stamp_phase_s: dict[str, float] = field(default_factory=lambda: {"grs": 0.0, "command": 0.0})
     bridged: dict[str, int] = field(default_factory=dict)
     filled: np.ndarray | None = None
+    angular_gap_weight: np.ndarray | None = None
+    command_doubt: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -114,7 +125,34 @@ class DiagnosisInput:
         return DiagnosisInput(self.t_s[window], self.st_quat_xyzw[window], self.voltages_v[window],
                               self.torque_cmd_n_m[window], self.sample_rate_hz, dict(self.rejected),
                               dict(self.stamp_phase_s), dict(self.bridged),
-                              None if self.filled is None else self.filled[window].copy())
+                              None if self.filled is None else self.filled[window].copy(),
+                              None if self.angular_gap_weight is None else self.angular_gap_weight[window].copy(),
+                              _doubt_window(self.command_doubt, start, stop, self.n))
+
+    @property
+    def angular_loss(self) -> tuple[float, np.ndarray]:
+        """What the bridged gaps leave of the angular acceleration, per epoch (:mod:`.angular_gaps`): the mean
+        of :attr:`angular_gap_weight` (units of the torque channel's white noise) and the mean torque
+        covariance of the misplaced command changes, ``sum var s s^T / n`` (3, 3) [N^2 m^2]."""
+        weight = 0.0 if self.angular_gap_weight is None or self.n == 0 else float(np.mean(self.angular_gap_weight))
+        torque = np.zeros((3, 3))
+        if self.command_doubt is not None and self.n:
+            steps, variance = self.command_doubt[:, 1:4], self.command_doubt[:, 4]
+            torque = np.einsum("c,ci,cj->ij", variance, steps, steps) / self.n
+        return weight, torque
+
+
+def _doubt_window(doubt: np.ndarray | None, start: int | None, stop: int | None, n: int) -> np.ndarray | None:
+    """The rows of :attr:`DiagnosisInput.command_doubt` within epochs ``start:stop``, epochs renumbered."""
+    if doubt is None:
+        return None
+    first, last, _ = slice(start, stop).indices(n)
+    inside = (doubt[:, 0] >= first) & (doubt[:, 0] < last)
+    if not np.any(inside):
+        return None
+    out = doubt[inside].copy()
+    out[:, 0] -= first
+    return out
 
 
 def _array(name: str, value: ArrayLike, shape_tail: tuple[int, ...]) -> np.ndarray:
@@ -227,8 +265,10 @@ def _on_epochs(streams: dict[str, tuple[np.ndarray, np.ndarray]], fs: float, cou
     return grid, values, present, -gridded.offset_s("star_tracker")
 
 
-def _bridge_all(values: dict[str, np.ndarray], present: dict[str, np.ndarray], torque: np.ndarray) -> dict[str, int]:
-    """Bridge the short gaps of every stream in place; returns the samples filled per stream.
+def _bridge_all(values: dict[str, np.ndarray], present: dict[str, np.ndarray], torque: np.ndarray
+                ) -> tuple[dict[str, int], np.ndarray]:
+    """Bridge the short gaps of every stream in place; returns the samples filled per stream and the
+    angular acceleration neither GRS measured (:func:`.angular_gaps.angular_gap_weight`).
 
     The star tracker along the rotation between its neighbours. The GRS: the spacecraft's common angular
     and linear acceleration (thruster noise, ~30 times a GRS's own noise) must cancel in the differences
@@ -248,6 +288,7 @@ def _bridge_all(values: dict[str, np.ndarray], present: dict[str, np.ndarray], t
         own[g] = values[g].copy()
         own[g + "_present"] = received[g].copy()
         _bridge(own[g], own[g + "_present"], quaternion=False, torque=torque)
+    weight = angular_gap_weight(received["grs1"], received["grs2"], own["grs1_present"])
     both = received["grs1"] & received["grs2"]
     for g, o, source in (("grs1", "grs2", received["grs2"]), ("grs2", "grs1", own["grs1_present"])):
         from_other = own[g + "_present"] & ~received[g] & source
@@ -269,12 +310,12 @@ def _bridge_all(values: dict[str, np.ndarray], present: dict[str, np.ndarray], t
         n = int(np.count_nonzero(present[g] & ~received[g]))
         if n:
             bridged[g] = n
-    return bridged
+    return bridged, weight
 
 
 def _finish(grid: np.ndarray, values: dict[str, np.ndarray], present: dict[str, np.ndarray], tau: np.ndarray,
             fs: float, counts: Counter, bridged: dict[str, int], stamp_phase_s: dict[str, float],
-            estimated: np.ndarray) -> DiagnosisInput:
+            estimated: np.ndarray, weight: np.ndarray, doubt: np.ndarray | None = None) -> DiagnosisInput:
     """The longest segment of epochs holding every stream (after bridging); the rest counted. ``estimated``: (n,)
     epochs where some stream holds an estimate (bridged, or the command unknown), ``DiagnosisInput.filled``."""
     valid = present["star_tracker"] & present["grs1"] & present["grs2"]
@@ -293,9 +334,11 @@ def _finish(grid: np.ndarray, values: dict[str, np.ndarray], present: dict[str, 
         q *= sign[:, None]
     voltages = np.stack((values["grs1"], values["grs2"]), axis=1)[start:stop].copy()
     filled = np.asarray(estimated, dtype=bool)[start:stop].copy()
+    weight = weight[start:stop].copy()
     return DiagnosisInput(grid[start:stop].copy(), q, voltages, np.asarray(tau)[start:stop].copy(), fs,
                           {key: int(value) for key, value in counts.items() if value}, dict(stamp_phase_s),
-                          dict(bridged), filled if np.any(filled) else None)
+                          dict(bridged), filled if np.any(filled) else None, weight if np.any(weight) else None,
+                          _doubt_window(doubt, start, stop, grid.shape[0]))
 
 
 def _valid_rows(name: str, t: np.ndarray, x: np.ndarray, counts: Counter) -> np.ndarray:
@@ -361,12 +404,14 @@ def prepare_input(t_s: ArrayLike, st_quat_xyzw: ArrayLike, voltages_v: ArrayLike
     counts["nan_or_inf"] += int(np.count_nonzero(~good))
     held = commands_on_grid(t[good] - 1.0 / fs, tau[good], grid, fs)
     received = present["star_tracker"] & present["grs1"] & present["grs2"]
-    bridged = _bridge_all(values, present, held)
-    return _finish(grid, values, present, held, fs, counts, bridged, {"grs": phase_grs, "command": 0.0}, ~received)
+    bridged, weight = _bridge_all(values, present, held)
+    return _finish(grid, values, present, held, fs, counts, bridged, {"grs": phase_grs, "command": 0.0}, ~received,
+                   weight)
 
 
 def _locate_lost_changes(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, grid: np.ndarray, fs: float,
-                         tau: np.ndarray, values: dict[str, np.ndarray], present: dict[str, np.ndarray]) -> np.ndarray:
+                         tau: np.ndarray, values: dict[str, np.ndarray], present: dict[str, np.ndarray]
+                         ) -> tuple[np.ndarray, np.ndarray | None]:
     """Commands lost where they changed: the change put at the epoch the GRS show, else its epochs marked unknown.
 
     The held command (:func:`commands_on_grid`) changes at the first row received with the new value. When the
@@ -382,7 +427,9 @@ def _locate_lost_changes(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, 
     GRS's gap, so that the GRS bridged across it (:func:`_bridge`, which follows the
     command's step) step with it and the channels stay consistent there (the 3-h deep_space run: five such
     changes; held to the next row instead, each read 20 to 100 sigma per epoch in the torque channel and a
-    GRS time offset in the fits).
+    GRS time offset in the fits). Each such change is also returned as a row of
+    :attr:`DiagnosisInput.command_doubt`: where it lies in the GRS gap is unknown, so the attitude rate the
+    channels integrate across it is uncertain by the step times that (:mod:`.angular_gaps`).
     """
     unknown = np.zeros(grid.shape[0], dtype=bool)
     stamps = np.asarray(command_t_s, dtype=np.float64)
@@ -391,16 +438,16 @@ def _locate_lost_changes(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, 
     order = np.argsort(stamps[good], kind="stable")
     stamps, torque = stamps[good][order], torque[good][order]
     if stamps.shape[0] < 3 or grid.shape[0] < 3:
-        return unknown
+        return unknown, None
     dt = 1.0 / fs
     interval = np.diff(stamps)
     cadence = max(float(np.median(interval)), dt)
     if cadence > dt * (1.0 + _GRID_TOL):
-        return unknown  # rows at changes and at 1 Hz (the contract's minimum): a lost change leaves no trace
+        return unknown, None  # rows at changes and at 1 Hz (the contract's minimum): a lost change leaves no trace
     changed = np.any(np.diff(torque, axis=0) != 0.0, axis=1)
     doubtful = np.flatnonzero(changed & (interval > cadence + _GRID_TOL * dt)) + 1  # rows whose change may be early
     if not doubtful.size:
-        return unknown
+        return unknown, None
     grs = np.concatenate((values["grs1"], values["grs2"]), axis=1)
     both = present["grs1"] & present["grs2"]
     response = _command_response(grs, both, tau)
@@ -408,6 +455,7 @@ def _locate_lost_changes(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, 
     d_grs = np.concatenate((np.zeros((1, grs.shape[1])), np.diff(grs, axis=0)))
     # a row is in force from the first epoch whose step starts at or after its stamp (commands_on_grid)
     reach = grid - dt + _GRID_TOL * dt
+    doubt: list[tuple[float, ...]] = []
     for i in doubtful:
         first = int(np.searchsorted(reach, stamps[i - 1], side="left"))  # the old value's epoch, received
         new = int(np.searchsorted(reach, stamps[i], side="left"))  # the new value's first epoch, received
@@ -429,7 +477,9 @@ def _locate_lost_changes(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, 
         hidden = candidates[~pair[candidates]]
         if hidden.size:  # in the GRS's own gap: in its middle, so that the GRS bridged there step with it
             tau[hidden[hidden.size // 2]:new + 1] = torque[i]
-    return unknown
+            # placed up to half the gap from where it took effect: uniform over the gap's epochs
+            doubt.append((hidden[hidden.size // 2], *(torque[i] - torque[i - 1]), (hidden.size ** 2 - 1) / 12.0))
+    return unknown, (np.array(doubt, dtype=np.float64) if doubt else None)
 
 
 def commands_on_grid(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, sample_t_s: ArrayLike,
@@ -525,7 +575,8 @@ def align_streams(st_t_s: ArrayLike, st_quat_xyzw: ArrayLike, grs1_t_s: ArrayLik
     phase_c = _phase_steps(command_t[np.isfinite(command_t)], float(grid[0]), dt)
     tau = commands_on_grid(command_t - phase_c * dt, command_torque_n_m, grid, fs)
     received = present["star_tracker"] & present["grs1"] & present["grs2"]
-    unknown = _locate_lost_changes(command_t - phase_c * dt, command_torque_n_m, grid, fs, tau, values, present)
-    bridged = _bridge_all(values, present, tau)
+    unknown, doubt = _locate_lost_changes(command_t - phase_c * dt, command_torque_n_m, grid, fs, tau, values,
+                                          present)
+    bridged, weight = _bridge_all(values, present, tau)
     return _finish(grid, values, present, tau, fs, counts, bridged, {"grs": phase_grs, "command": phase_c * dt},
-                   ~received | unknown)
+                   ~received | unknown, weight, doubt)

@@ -106,7 +106,7 @@ class Record:
         self.keep = scan_keep(inp.filled, inp.n)
         self.k_max = _k_max(self.n, model.sample_rate_hz, settings.f_max_hz)
         self.bins = np.arange(1, self.k_max + 1)
-        self.spectrum = NoiseSpectrum(model, com_offset_m, self.n)
+        self.spectrum = NoiseSpectrum(model, com_offset_m, self.n, inp.angular_loss)
         self.ctx = CandidateContext(self.lin, self.readouts, model, settings.orbit_period_s, settings.suspension_hz,
                                     settings.damping, t_mid_s)
         self.fixed = list(fixed)
@@ -562,7 +562,7 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
                 change, derivatives = _change_and_derivatives(ctx, entry, value)
                 lin.channels[:] -= change
                 columns += derivatives
-        whitener = Whitener(NoiseSpectrum(model, d, n), bins)
+        whitener = Whitener(NoiseSpectrum(model, d, n, inp.angular_loss), bins)
         design = Design.build(whitener, dft(lin.channels, k_max), [*names, *(f"free{j}" for j in range(len(columns)))],
                               [column_fft(nuisance_column(lin, model, name), k_max) for name in names]
                               + [column_fft(column, k_max) for column in columns])

@@ -25,6 +25,14 @@ A = 1 - phi z):
 - lin_common = A (F/M) + e_SRP + A [d_mean x] nbar + A (P_1 nL_1 + P_2 nL_2) / 2
 - lin_diff = [(d_1 - d_2) x] nbar + P_1 nL_1 - P_2 nL_2
 
+Where both GRS lost samples and the record bridged them, the angular acceleration there was not measured
+(:mod:`.angular_gaps`): three more sources, a white error of the mean angular acceleration m with
+covariance ``w C + J^-1 T J^-T`` (``angular_loss``: w the mean gap weight, C the torque channel's white
+covariance, T the torque covariance of the command changes placed in doubt), in st (``- B``)
+and torque (``+ 1``) only: the bridged linear readouts follow the bridged angular ones through the map
+between the two GRS, so ``lin_diff`` and ``lin_common`` do not see it. u = 0 leaves the 24 sources and
+the spectra unchanged.
+
 Fit
 ---
 The whitened residual ``w_k = L_k^-1 Y_k`` (``S_k = L_k L_k^H``) and whitened columns give, over
@@ -46,7 +54,6 @@ from taiji2_estimator_pkg.diagnosis.model import NominalModel
 
 __all__ = ["ConditionedFit", "Design", "NoiseSpectrum", "Whitener", "dft", "skew"]
 
-N_SOURCES = 24
 _CHUNK = 4096  # bins per block (memory only)
 
 
@@ -87,9 +94,14 @@ class NoiseSpectrum:
         (2, 3) d_i at the linearization point (the regressor noise ``n x d``) [m].
     n : int
         Record length (bins k correspond to f = k fs / n).
+    angular_loss : tuple of (float, numpy.ndarray), optional
+        The angular acceleration the record's bridged gaps did not measure
+        (:attr:`.inputs.DiagnosisInput.angular_loss`): per epoch, a variance in units of the torque
+        channel's white noise, and a (3, 3) torque covariance [N^2 m^2] of command changes placed in doubt.
     """
 
-    def __init__(self, model: NominalModel, com_offset_m: np.ndarray, n: int) -> None:
+    def __init__(self, model: NominalModel, com_offset_m: np.ndarray, n: int,
+                 angular_loss: tuple[float, np.ndarray] | None = None) -> None:
         self.model = model
         self.n = int(n)
         self._conditioned: tuple | None = None  # (key, arrays) of :meth:`_conditioning`
@@ -101,6 +113,16 @@ class NoiseSpectrum:
         self._half_p = half_p
         self._d_mean_x = skew(0.5 * (d[0] + d[1]))
         self._d_diff_x = skew(d[0] - d[1])
+        # the error of m where no GRS measured it: m += F u (u white, unit), F F^T = w C + J^-1 T J^-T
+        self._unmeasured_factor = None
+        weight, torque_cov = angular_loss if angular_loss is not None else (0.0, np.zeros((3, 3)))
+        if weight > 0.0 or np.any(torque_cov):
+            white = model.inertia_inv @ np.diag(model.var_torque) @ model.inertia_inv.T + sum(
+                p @ np.diag(v) @ p.T for p, v in zip(half_p, model.var_angular, strict=True))
+            covariance = weight * white + model.inertia_inv @ np.asarray(torque_cov) @ model.inertia_inv.T
+            eigenvalues, vectors = np.linalg.eigh(0.5 * (covariance + covariance.T))  # rank < 3 allowed
+            self._unmeasured_factor = vectors * np.sqrt(np.maximum(eigenvalues, 0.0))[None, :]
+            self.variances = np.concatenate((self.variances, np.ones(3)))
 
     def frequencies_hz(self, bins: np.ndarray) -> np.ndarray:
         """f_k = k fs / n [Hz]."""
@@ -112,7 +134,7 @@ class NoiseSpectrum:
         bins = np.asarray(bins)
         z = np.exp(-2j * np.pi * bins / self.n)
         count = z.shape[0]
-        t = np.zeros((count, 15, N_SOURCES), dtype=np.complex128)
+        t = np.zeros((count, 15, self.variances.shape[0]), dtype=np.complex128)
         eye = np.eye(3)
         d2 = (1.0 - z) ** 2 / model.dt_s ** 2
         b = 0.5 * (1.0 + z)
@@ -141,6 +163,10 @@ class NoiseSpectrum:
         t[:, 12:15, 15:18] = self._d_diff_x @ hp2
         t[:, 12:15, 18:21] = 2.0 * hp1
         t[:, 12:15, 21:24] = -2.0 * hp2
+        if self._unmeasured_factor is not None:  # a common error of m in st and torque (module docstring)
+            f = self._unmeasured_factor
+            t[:, 0:3, 24:27] = -b[:, None, None] * f
+            t[:, 3:6, 24:27] = f
         return t
 
     def matrices(self, bins: np.ndarray) -> np.ndarray:
