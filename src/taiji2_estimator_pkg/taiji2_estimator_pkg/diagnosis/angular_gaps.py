@@ -17,8 +17,9 @@ The bridged linear readouts follow the bridged angular ones (the map between the
 coupling ``m x (d_1 - d_2)``), so ``lin_diff`` does not see the error; the star-tracker and torque
 channels do. A command change lost inside such a gap is worse: it is placed in the gap's middle
 (:func:`.inputs._locate_lost_changes`), and m steps with it, so a placement off by e epochs leaves the
-rate wrong by ``J^-1 step e dt``, for a maneuver step far more than the noise's. Its placement is uniform over the k epochs of the gap, variance ``(k^2 - 1) / 12``
-(``DiagnosisInput.command_doubt``).
+rate wrong by ``J^-1 step e dt``, for a maneuver step far more than the noise's. It took effect at any
+of the gap's epochs that the GRS do not show, equally likely: the placement's mean square error e^2
+over them (``(k^2 - 1) / 12`` for k contiguous epochs) is its variance (``DiagnosisInput.command_doubt``).
 
 The diagnosis keeps the data and states the loss in its noise model instead: at low frequency the
 defect of one bridged run of k epochs is its sum ``sum_j delta_j``. With the interpolation weights s_j
@@ -27,7 +28,7 @@ s_j x_b`` for white x of covariance C, so ``var(sum_j delta_j) = (k + (sum_j (1 
 s_j)^2) C``: 1.5 C for one lost sample, 3.5 C per sample for five. :func:`angular_gap_weight` spreads
 that factor over the run's epochs; its mean over the record is the variance, in units of C, of a white
 error of m that :class:`.spectral.NoiseSpectrum` adds, with the misplaced changes' ``J^-1 step step^T
-J^-T (k^2 - 1) / 12`` averaged over the record (``DiagnosisInput.angular_loss``). A record without such
+J^-T e^2`` averaged over the record (``DiagnosisInput.angular_loss``). A record without such
 gaps adds nothing, and its spectra are unchanged to the bit.
 """
 

@@ -476,9 +476,10 @@ def _locate_lost_changes(command_t_s: ArrayLike, command_torque_n_m: ArrayLike, 
         unknown[first + 1:new] = True
         hidden = candidates[~pair[candidates]]
         if hidden.size:  # in the GRS's own gap: in its middle, so that the GRS bridged there step with it
-            tau[hidden[hidden.size // 2]:new + 1] = torque[i]
-            # placed up to half the gap from where it took effect: uniform over the gap's epochs
-            doubt.append((hidden[hidden.size // 2], *(torque[i] - torque[i - 1]), (hidden.size ** 2 - 1) / 12.0))
+            placed = hidden[hidden.size // 2]
+            tau[placed:new + 1] = torque[i]
+            # it took effect at any of the hidden epochs, equally likely: the placement's mean square error
+            doubt.append((placed, *(torque[i] - torque[i - 1]), float(np.mean((hidden - placed) ** 2))))
     return unknown, (np.array(doubt, dtype=np.float64) if doubt else None)
 
 
