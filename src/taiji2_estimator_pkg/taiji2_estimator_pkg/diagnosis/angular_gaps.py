@@ -36,10 +36,10 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["angular_gap_weight"]
+__all__ = ["angular_gap_weight", "runs"]
 
 
-def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """[start, stop) of the runs of True in a (n,) bool array."""
     edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
     return edges[0::2], edges[1::2]
@@ -71,9 +71,9 @@ def angular_gap_weight(grs1_received: np.ndarray, grs2_received: np.ndarray,
         return weight
     # the interpolation parameter s_j of each epoch inside GRS1's own bridged gap (a = start - 1, b = stop)
     s = np.zeros(received1.shape[0])
-    for start, stop in zip(*_runs(~received1 & np.asarray(grs1_bridged, dtype=bool)), strict=True):
+    for start, stop in zip(*runs(~received1 & np.asarray(grs1_bridged, dtype=bool)), strict=True):
         s[start:stop] = (np.arange(start, stop) - (start - 1)) / (stop - (start - 1))
-    for start, stop in zip(*_runs(unmeasured), strict=True):
+    for start, stop in zip(*runs(unmeasured), strict=True):
         k = stop - start
         weight[start:stop] = (k + np.sum(1.0 - s[start:stop]) ** 2 + np.sum(s[start:stop]) ** 2) / k
     return weight

@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from taiji2_estimator_pkg.core.attitude import quat_conjugate, quat_multiply, rotvec_from_quat
-from taiji2_estimator_pkg.diagnosis.angular_gaps import angular_gap_weight
+from taiji2_estimator_pkg.diagnosis.angular_gaps import angular_gap_weight, runs
 from taiji2_estimator_pkg.epochs import GRID_TOLERANCE, UndeterminedError, circular_offset, grid_streams
 
 __all__ = ["MAX_BRIDGE_SAMPLES", "DiagnosisInput", "InputError", "align_streams", "commands_on_grid",
@@ -217,9 +217,7 @@ def _bridge(values: np.ndarray, present: np.ndarray, quaternion: bool, torque: n
         new = present & ~before
         values[new] = rest[new] + explained[new]  # the samples received stay bit for bit
         return filled
-    padded = np.concatenate(([True], present, [True])).astype(np.int8)
-    edges = np.flatnonzero(np.diff(padded))
-    starts, stops = edges[0::2], edges[1::2]  # [start, stop) of the runs of missing rows
+    starts, stops = runs(~present)  # [start, stop) of the runs of missing rows
     filled = 0
     for start, stop in zip(starts, stops, strict=True):
         if start == 0 or stop == present.size or stop - start > MAX_BRIDGE_SAMPLES:
