@@ -9,6 +9,7 @@ from spacepackets.ecss.tc import PusTc
 
 from taiji2_ground_pkg.uplink_plan import PlanError, maneuver_activities, plan_uplinks
 from taiji2_model.maneuver import SquareWaveManeuver
+from taiji2_runtime.packets.packetize import PacketError, packet_crc
 from taiji2_runtime.packets.scheduling import (
     ACCEPTANCE_FAILURE_CODES,
     FAILURE_LATE,
@@ -72,3 +73,15 @@ def test_plan_splits_over_passes_with_safe_stop_and_capacity():
                              "contacts": {"period_s": 3600.0, "first_start_s": 0.0, "duration_s": 600.0}})
     with pytest.raises(PlanError, match="capacity 50"):
         plan_uplinks(acts, small)
+
+
+def test_a_telecommand_spacepackets_cannot_read_is_a_packet_defect():
+    """Found by the fuzzing: a PUS-A TC (version 1) inside an authentic frame made spacepackets raise a plain
+    ValueError through the onboard acceptance; it is a ``bad_header`` defect with its own TM[1,2] code."""
+    packet = bytearray(encode_insert_activities(0, [Activity(200 * 10**9, (1e-6, 0.0, 0.0))]))
+    packet[6] = (packet[6] & 0x0F) | 0x10
+    packet[-2:] = packet_crc(bytes(packet[:-2])).to_bytes(2, "big")
+    with pytest.raises(PacketError, match="bad_header"):
+        decode_insert_activities(bytes(packet))
+    assert ACCEPTANCE_FAILURE_CODES["bad_header"] not in {v for k, v in ACCEPTANCE_FAILURE_CODES.items()
+                                                          if k != "bad_header"}

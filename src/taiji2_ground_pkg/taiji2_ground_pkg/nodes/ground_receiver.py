@@ -72,6 +72,7 @@ class GroundReceiver(rclpy.node.Node):
         self._ended = False
         self._samples_out = 0
         self._reports_seen: set[tuple[int, int]] = set()
+        self._report_packets = 0  # verification and frame security reports decoded (duplicates included)
         self._new_reports: list[dict[str, Any]] = []
         self._frame_security: dict[str, Any] | None = None  # the latest frame security report (onboard time order)
         self._last_diagnostics: tuple[float, int] | None = None  # (monotonic time, level) of the last sent
@@ -82,7 +83,8 @@ class GroundReceiver(rclpy.node.Node):
     def _on_burst(self, msg: Any) -> None:
         try:
             packets = lt.split(msg)
-        except ValueError as exc:
+        except ValueError as exc:  # nothing of a burst that does not divide into its packets is read
+            self._rx.rejected["unsplittable_burst"] += 1
             self.get_logger().error(f"burst refused: {exc}", throttle_duration_sec=10.0)
             return
         for packet, receive_ns in zip(packets, msg.times_ns, strict=True):
@@ -112,6 +114,7 @@ class GroundReceiver(rclpy.node.Node):
         except PacketError as exc:
             self._rx.rejected[f"report_{exc.kind}"] += 1
             return
+        self._report_packets += 1
         key = (r.subtype, r.tc_seq_count)
         if key in self._reports_seen:
             return  # a duplicate
@@ -126,6 +129,7 @@ class GroundReceiver(rclpy.node.Node):
         except PacketError as exc:
             self._rx.rejected[f"report_{exc.kind}"] += 1
             return
+        self._report_packets += 1
         if self._frame_security is not None and onboard_ns <= self._frame_security["onboard_s"] * _NS:
             return  # a duplicate or an older one played back late
         self._frame_security = {"onboard_s": onboard_ns / _NS, "ground_s": receive_ns / _NS,
@@ -163,6 +167,7 @@ class GroundReceiver(rclpy.node.Node):
                                        for k, v in self._rx.released_through_ns().items()},
                 "counts": self._rx.counts(), "rejected": dict(self._rx.rejected), "end_of_data": self._ended,
                 "command_reports": self._new_reports, "command_reports_total": len(self._reports_seen),
+                "report_packets": self._report_packets,
                 "frame_security": self._frame_security}
 
     def _publish_reception(self) -> None:

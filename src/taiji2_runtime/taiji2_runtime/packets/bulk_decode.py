@@ -174,8 +174,8 @@ def decode_packet_buffers(buffers: list[tuple[str, bytes]], correlation: TimeCor
         for packet in tc_packets:
             try:
                 tc = decode_torque_tc(packet)
-            except PacketError as exc:
-                counts[exc.kind] += 1
+            except PacketError as exc:  # another APID cannot be (the walk sorted them): another service
+                counts["wrong_service" if exc.kind == "unknown_apid" else exc.kind] += 1
                 continue
             seqs.append(tc.seq_count)
             times.append(tc.execute_onboard_ns)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from taiji2_runtime.packets.bulk_decode import DecodedPackets, decode_packet_buffers
 from taiji2_runtime.packets.time_correlation import TimeCorrelation, load_time_correlation
-from taiji2_runtime.packets.walk import _sound
+from taiji2_runtime.packets.walk import starts_with_sound_packet
 
 __all__ = ["PacketFileError", "is_packet_file", "is_packet_path", "packet_files", "read_packets", "write_packets"]
 
@@ -41,7 +41,7 @@ def is_packet_file(path: str | Path) -> bool:
             head = handle.read(_PROBE_OCTETS)
     except OSError:
         return False
-    return _sound(head, 0)
+    return starts_with_sound_packet(head)
 
 
 def packet_files(path: str | Path) -> list[Path]:

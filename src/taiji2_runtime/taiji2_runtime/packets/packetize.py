@@ -33,7 +33,7 @@ SEQ_MODULO = 1 << 14
 
 class PacketError(ValueError):
     """A packet that cannot be decoded; ``kind`` names the defect (``truncated``, ``crc_error``,
-    ``unknown_apid``, ``idle``, ``wrong_length``, ``bad_time_field``, ``not_telemetry``)."""
+    ``unknown_apid``, ``idle``, ``wrong_length``, ``bad_time_field``, ``not_telemetry``, ``bad_header``)."""
 
     def __init__(self, kind: str, detail: str) -> None:
         self.kind = kind

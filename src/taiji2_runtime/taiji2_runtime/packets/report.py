@@ -11,8 +11,8 @@ from taiji2_runtime.packets.definition import STREAM_BY_APID, TC_APID
 __all__ = ["APID_COUNTS", "PacketReport"]
 
 #: per-APID counters, in print order
-APID_COUNTS = ("packets", "kept", "crc_error", "truncated", "wrong_length", "bad_time_field", "duplicate",
-               "out_of_order", "sequence_gap", "wraps")
+APID_COUNTS = ("packets", "kept", "crc_error", "truncated", "wrong_length", "bad_time_field", "bad_header",
+               "wrong_service", "duplicate", "out_of_order", "sequence_gap", "wraps")
 
 
 def _apid_name(apid: int) -> str:
@@ -37,6 +37,7 @@ class PacketReport:
         ``{apid: Counter}`` with the keys of :data:`APID_COUNTS`: ``packets`` (sound packets),
         ``kept`` (samples after deduplication), ``crc_error`` (dropped; APID as read),
         ``truncated`` (final packet cut short), ``wrong_length`` / ``bad_time_field`` (dropped),
+        ``bad_header`` / ``wrong_service`` (telecommands: not a PUS-C TC, not the torque service; dropped),
         ``duplicate`` (copies left out), ``out_of_order`` (kept, reordered), ``sequence_gap``
         (counts never received soundly: the samples become missing), ``wraps`` (14-bit wraps).
     unknown_apid : collections.Counter

@@ -53,7 +53,8 @@ REPORT_APID = 0x141
 FAILURE_LATE = 1  # an activity's release time was before its arrival plus the time margin
 FAILURE_CAPACITY = 2  # the onboard schedule was full
 #: TM[1,2] failure codes: the PacketError kind of a telecommand refused at acceptance
-ACCEPTANCE_FAILURE_CODES = {"crc_error": 3, "truncated": 4, "unknown_apid": 5, "wrong_length": 6, "bad_time_field": 7}
+ACCEPTANCE_FAILURE_CODES = {"crc_error": 3, "truncated": 4, "unknown_apid": 5, "wrong_length": 6, "bad_time_field": 7,
+                            "bad_header": 8}
 #: instructions per TC[11,4]: 8 + 69 octets each, a packet of at most 15 + 12 x 77 = 939 octets, so that one
 #: packet fits one SDLS-secured TC transfer frame (987 octets of frame data, :mod:`.sdls`)
 MAX_ACTIVITIES_PER_TC = 12
@@ -89,8 +90,8 @@ def decode_insert_activities(packet: bytes) -> tuple[PusTc, list[TorqueCommand]]
     Raises
     ------
     PacketError
-        ``crc_error``, ``truncated``, ``unknown_apid`` (not TC[11,4] of APID 0x140), ``wrong_length``,
-        ``bad_time_field``.
+        ``crc_error``, ``truncated``, ``bad_header``, ``unknown_apid`` (not TC[11,4] of APID 0x140),
+        ``wrong_length``, ``bad_time_field``.
     """
     tc = unpack_telecommand(packet, SCHEDULING_SERVICE, INSERT_ACTIVITIES, " is not TC[11,4]")
     data = tc.app_data

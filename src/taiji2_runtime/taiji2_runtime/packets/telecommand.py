@@ -53,7 +53,8 @@ def unpack_telecommand(packet: bytes, service: int, subtype: int, expected: str)
     Raises
     ------
     PacketError
-        ``crc_error``, ``truncated`` or ``unknown_apid`` (another APID or service).
+        ``crc_error``, ``truncated``, ``bad_header`` (not a PUS-C TC spacepackets can read) or ``unknown_apid``
+        (another APID or service).
     """
     try:
         tc = PusTc.unpack(bytes(packet))
@@ -61,6 +62,9 @@ def unpack_telecommand(packet: bytes, service: int, subtype: int, expected: str)
         raise PacketError("crc_error", f"telecommand: {exc}") from None
     except BytesTooShortError as exc:
         raise PacketError("truncated", f"telecommand: {exc}") from None
+    except Exception as exc:  # spacepackets refuses a foreign or damaged header with several types (a PUS-A TC:
+        # ValueError); every one of them is a defect of the packet, never an error of the caller
+        raise PacketError("bad_header", f"telecommand: {type(exc).__name__}: {exc}") from None
     if tc.apid != TC_APID or tc.service != service or tc.message_subtype != subtype:
         raise PacketError("unknown_apid", f"telecommand APID 0x{tc.apid:03X} service {tc.service},{tc.message_subtype}"
                                           f"{expected}")
