@@ -20,5 +20,5 @@ setup(
     package_data={PACKAGE: ["py.typed"]},
     install_requires=["numpy", "scipy", "PyYAML", "taiji2_model", "taiji2_runtime"],
     python_requires=">=3.10",
-    entry_points={"console_scripts": ["maneuver_commander = taiji2_sim_pkg.nodes.maneuver_commander:main", "spacecraft_sim = taiji2_sim_pkg.nodes.spacecraft_sim:main", "telemetry_packetizer = taiji2_sim_pkg.nodes.telemetry_packetizer:main", "space_link = taiji2_sim_pkg.nodes.space_link:main", "onboard_executor = taiji2_sim_pkg.nodes.onboard_executor:main"]},
+    entry_points={"console_scripts": ["maneuver_commander = taiji2_sim_pkg.nodes.maneuver_commander:main", "spacecraft_sim = taiji2_sim_pkg.nodes.spacecraft_sim:main", "telemetry_packetizer = taiji2_sim_pkg.nodes.telemetry_packetizer:main", "space_link = taiji2_sim_pkg.nodes.space_link:main", "onboard_executor = taiji2_sim_pkg.nodes.onboard_executor:main", "uplink_intruder = taiji2_sim_pkg.nodes.uplink_intruder:main"]},
 )

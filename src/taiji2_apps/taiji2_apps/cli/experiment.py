@@ -125,6 +125,10 @@ def main(args: argparse.Namespace) -> int:
             raise ValueError(f"--timeout-s {args.timeout_s:g}: must be > 0")
         if args.record and Path(args.record).exists():
             raise ValueError(f"--record {args.record}: already exists; choose another output or remove it")
+        link_only = [o for o, v in (("--link-fault", args.link_fault), ("--key-file", args.key_file),
+                                     ("--uplink-attack", args.uplink_attack)) if v]
+        if link_only and not args.link:
+            raise ValueError(f"{', '.join(link_only)}: only with --link (the direct run has no uplink)")
     except ValueError as exc:
         print(f"error: taiji2 experiment: {' '.join(str(exc).split())}", file=sys.stderr)
         return ExitStatus.BAD_INPUT

@@ -41,6 +41,10 @@ def add_link_arguments(parser: argparse.ArgumentParser) -> None:
                         help="SDLS key file (docs/security.md) the planner signs the uplink with and the spacecraft "
                              "checks it against (its highest active SPI signs); default: a throwaway key made for "
                              "this run in a private temporary directory, removed at the end")
+    parser.add_argument("--uplink-attack", default="", metavar="KINDS",
+                        help="an intruder on the uplink during the run (testing command security, docs/security.md): "
+                             "all, or comma-separated forged, replay, bit_flip, revoked, garbage; the results say "
+                             "what it sent and what the spacecraft refused")
 
 
 def estimate_stamps_ns(msg: Any) -> tuple[int, int]:
@@ -99,12 +103,15 @@ class LinkMonitor:
         self._watch(node, t.ComOffsetEstimate, "/taiji2/estimates/com_offset_difference", keep_all)
         self.reception: list[dict[str, Any]] = []
         self.link_report: dict[str, Any] | None = None
+        self.intruder: dict[str, Any] | None = None
         self.diagnostics: dict[str, Any] = {}
         self.faults_seen: dict[str, str] = {}
         s = messages.std_msgs.String
         node.create_subscription(s, "/ground/link/reception", self._counted(
             lambda m: self.reception.append(json.loads(m.data))), keep_all)
         node.create_subscription(s, "/taiji2/sim/link_report", self._counted(self._on_report), latched)
+        node.create_subscription(s, "/taiji2/sim/intruder_report", self._counted(
+            lambda m: setattr(self, "intruder", json.loads(m.data))), latched)
         self.plan: list[dict[str, Any]] | None = None
         node.create_subscription(s, "/ground/commanding/plan", self._counted(
             lambda m: setattr(self, "plan", json.loads(m.data))), latched)
@@ -260,14 +267,19 @@ def format_link_report(link: dict[str, Any]) -> str:
         lines.append(f"Commanding (PUS 11): {c['tables']} TC[11,4] with {c['activities']} activities; acknowledged "
                      f"{c['acknowledged']}, completed {c['completed']}, activities refused onboard "
                      f"{c['refused_activities']}, lost on uplink {len(c['lost_on_uplink'])}")
+    if link.get("attacks"):
+        from taiji2_apps.cli.experiment_attack import format_attacks
+
+        lines.append(format_attacks(link["attacks"]))
     faults = link["faults"]
     lines.append("Link faults: " + ("; ".join(f"{k}: {v}" for k, v in faults.items()) if faults else "none"))
     return "\n".join(lines)
 
 
-def link_key_file(given: str) -> tuple[str, Any]:
-    """The key file of the run: ``given`` (checked to load), else a throwaway one (one random SPI-1 key) in a new
-    private temporary directory, never the repository or ``--out``; with the callable that removes it.
+def link_key_file(given: str, revoked_spare: bool = False) -> tuple[str, Any]:
+    """The key file of the run: ``given`` (checked to load), else a throwaway one (one random SPI-1 key; with
+    ``revoked_spare``, SPI 1 revoked and SPI 2 active) in a new private temporary directory, never the repository
+    or ``--out``; with the callable that removes it.
 
     Raises
     ------
@@ -283,7 +295,8 @@ def link_key_file(given: str) -> tuple[str, Any]:
         load_key_file(given).newest_active()  # KeyFileError (a ValueError) or no active SPI
         return str(Path(given).resolve()), lambda: None
     folder = tempfile.mkdtemp(prefix="taiji2-keys-")  # mode 0700
-    path = write_key_file(Path(folder) / "sdls_keys.json", new_key_table((1,)))
+    table = new_key_table((1, 2), revoked=(1,)) if revoked_spare else new_key_table((1,))
+    path = write_key_file(Path(folder) / "sdls_keys.json", table)
     return str(path), lambda: shutil.rmtree(folder, ignore_errors=True)
 
 
@@ -328,11 +341,26 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         print(f"error: taiji2 experiment: --duration-s {duration_s:g} ends before the first command table can be "
               f"onboard ({start_s:g} s)", file=sys.stderr)
         return ExitStatus.BAD_INPUT
+    from taiji2_apps.cli.experiment_attack import attack_kinds, leaked_key_file
+
     try:
-        key_file, remove_key = link_key_file(args.key_file)
+        attacks = attack_kinds(args.uplink_attack) if args.uplink_attack else []
+    except ValueError as exc:
+        print(f"error: taiji2 experiment: {exc}", file=sys.stderr)
+        return ExitStatus.BAD_INPUT
+    try:
+        key_file, remove_key = link_key_file(args.key_file, revoked_spare="revoked" in attacks)
     except ValueError as exc:
         print(f"error: taiji2 experiment: --key-file: {exc}", file=sys.stderr)
         return ExitStatus.BAD_INPUT
+    leaked, remove_leaked = "", lambda: None
+    if "revoked" in attacks:
+        try:
+            leaked, remove_leaked = leaked_key_file(key_file)
+        except ValueError as exc:
+            remove_key()
+            print(f"error: taiji2 experiment: --uplink-attack revoked: {exc}", file=sys.stderr)
+            return ExitStatus.BAD_INPUT
     # every relay holds its output until the readers of this graph have matched it (nodes/subscribed_publisher.py):
     # star tracker (scale factors; the paper's d too), GRS (both estimators), executed torque, reception (this
     # monitor, the planner); the recorder reads every ground topic
@@ -361,6 +389,10 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
     }
     # the simulator exits (0) at the end of its data; every other node runs until stopped (what ends the run is
     # the ground's: done(), below)
+    if attacks:
+        commands["uplink_intruder"] = ["run", "taiji2_sim_pkg", "uplink_intruder", "--ros-args",
+                                       "-p", f"attacks:={attacks}", "-p", f"leaked_key_file:={leaked}",
+                                       "-p", f"seed:={args.seed}"]
     nodes = [NodeProcess.taiji2(name, argv) for name, argv in commands.items()]
     nodes.append(NodeProcess.taiji2("spacecraft_sim", [
         "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard", *onboard_remaps, *source,
@@ -421,6 +453,7 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         node.destroy_node()
         rclpy.try_shutdown()
         remove_key()
+        remove_leaked()
 
     return run_to_status(graph, lambda result: _report(args, plan, model, link_seed, monitor, out, duration_s,
                                                        result.wall_s, temporary), cleanup)
@@ -460,6 +493,11 @@ def _report(args: argparse.Namespace, plan: Any, model: Any, link_seed: int, mon
             "final_ground_time_s": final["ground_time_s"], "wall_s": elapsed,
             "speed_x_real_time": duration_s / elapsed}
     link["commanding"] = commanding
+    link["frame_security"] = final.get("frame_security")  # the last frame security report the ground received
+    if args.uplink_attack:
+        from taiji2_apps.cli.experiment_attack import attack_summary
+
+        link["attacks"] = attack_summary(monitor.intruder, monitor.diagnostics)
     if link["commanding"]["lost_on_uplink"]:
         faults["command table lost on uplink"] = ("TC[11,4] #" + ", #".join(
             map(str, link["commanding"]["lost_on_uplink"])) + " never acknowledged")
