@@ -146,8 +146,9 @@ def test_link_nodes_parameters_are_read_only():
     from taiji2_sim_pkg.nodes.onboard_executor import OnboardExecutor
     from taiji2_sim_pkg.nodes.space_link import SpaceLink
     from taiji2_sim_pkg.nodes.telemetry_packetizer import TelemetryPacketizer
+    from taiji2_sim_pkg.nodes.uplink_intruder import UplinkIntruder
 
-    for node_class in (CommandPlanner, GroundReceiver, OnboardExecutor, SpaceLink, TelemetryPacketizer):
+    for node_class in (CommandPlanner, GroundReceiver, OnboardExecutor, SpaceLink, TelemetryPacketizer, UplinkIntruder):
         context = rclpy.context.Context()
         rclpy.init(context=context)
         node = node_class(context=context)

@@ -217,3 +217,35 @@ def test_fuzzed_uplink_never_raises_and_never_schedules(context, keys):
         assert sent > 1000
     finally:
         onboard.destroy_node()
+
+
+def test_the_intruders_frames_are_all_refused_and_the_genuine_tables_fly(context, keys, tmp_path):
+    """uplink_intruder against the executor, handlers called directly: every kind, every frame refused with the
+    reason it was built for, the genuine tables scheduled as sent (the running graph: test/faults)."""
+    from taiji2_runtime.packets.sdls_keys import KeyTable, SecurityAssociation
+    from taiji2_sim_pkg.nodes.uplink_intruder import UplinkIntruder
+
+    ground, onboard_file = keys
+    leaked = write_key_file(tmp_path / "leaked.json", KeyTable([SecurityAssociation(1, ground.get(1).key)]))
+    onboard = _executor(context, onboard_file)
+    intruder = UplinkIntruder(context=context, cli_args=["--ros-args", "-p", f"leaked_key_file:={leaked}"])
+    sent = []
+    intruder._tc_pub.publish = sent.append
+    try:
+        signer = FrameSigner(ground)  # SPI 2
+        genuine = lt.burst([signer.sign(_table(0)), signer.sign(_table(1, 300.0))], [ARRIVAL_NS] * 2, ARRIVAL_NS)
+        onboard._on_telecommands(genuine)
+        intruder._on_uplink(genuine)
+        intruder._on_uplink(sent[0])  # its own burst comes back to it: it attacks once
+        assert len(sent) == 1
+        onboard._on_telecommands(sent[0])
+        report = intruder.report()
+        assert report["sent"] == {"forged": 3, "replay": 3, "bit_flip": 3, "revoked": 3, "garbage": 50}
+        assert onboard.verifier.accepted == 2 and onboard.schedule.inserted == 24
+        assert sum(onboard.verifier.refused.values()) == report["frames"] == 62
+        for reason, n in report["expected_refusals"].items():
+            if reason != "any":
+                assert onboard.verifier.refused[reason] >= n, (reason, dict(onboard.verifier.refused))
+    finally:
+        intruder.destroy_node()
+        onboard.destroy_node()

@@ -34,13 +34,14 @@ class UplinkIntruder(rclpy.node.Node):
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("uplink_intruder", **node_kwargs)
         dp = self.declare_parameter
-        self._kinds = list(dp("attacks", list(ATTACK_KINDS), read_only(
-            f"attack kinds: {', '.join(ATTACK_KINDS)}")).value)
+        leaked_file = dp("leaked_key_file", "", read_only(
+            "a key file of revoked keys the intruder holds (the revoked attack); empty: none")).value
+        every = [k for k in ATTACK_KINDS if leaked_file or k != "revoked"]
+        self._kinds = list(dp("attacks", every, read_only(
+            f"attack kinds of {', '.join(ATTACK_KINDS)} (default: all; revoked only with leaked_key_file)")).value)
         unknown = sorted(set(self._kinds) - set(ATTACK_KINDS))
         if unknown:
             raise ValueError(f"attacks: unknown {unknown}; choose from {', '.join(ATTACK_KINDS)}")
-        leaked_file = dp("leaked_key_file", "", read_only(
-            "a key file of revoked keys the intruder holds (the revoked attack); empty: none")).value
         self._instances = int(dp("instances", 3, read_only("frames per attack kind")).value)
         self._flood = int(dp("flood_frames", 50, read_only("frames of the garbage flood")).value)
         self._seed = int(dp("seed", 0, read_only("seed of the intruder's random choices")).value)
