@@ -85,3 +85,14 @@ def test_a_telecommand_spacepackets_cannot_read_is_a_packet_defect():
         decode_insert_activities(bytes(packet))
     assert ACCEPTANCE_FAILURE_CODES["bad_header"] not in {v for k, v in ACCEPTANCE_FAILURE_CODES.items()
                                                           if k != "bad_header"}
+
+
+def test_a_report_with_a_foreign_time_field_is_a_packet_defect():
+    """Found by the fuzzing (benchmarks/bench_fuzz.py, downlink): a TM[1,1] whose CUC P-field is not ours raised
+    CucError out of the ground receiver; it is a ``bad_time_field`` defect, counted."""
+    tc = encode_insert_activities(0, [Activity(200 * 10**9, (1e-6, 0.0, 0.0))])
+    packet = bytearray(encode_report(1, PusTc.unpack(tc), 150 * 10**9, 3))
+    packet[13] = 0x2E  # the time field's P-field (after the 6-octet primary and 7 octets of PUS-C header)
+    packet[-2:] = packet_crc(bytes(packet[:-2])).to_bytes(2, "big")
+    with pytest.raises(PacketError, match="bad_time_field"):
+        decode_report(bytes(packet))

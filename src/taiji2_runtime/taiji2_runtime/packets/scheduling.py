@@ -146,7 +146,8 @@ def decode_report(packet: bytes) -> VerificationReport:
     Raises
     ------
     PacketError
-        If it is not one (``unknown_apid``) or fails its CRC (``crc_error``).
+        If it is not one (``unknown_apid``, also for a CRC failure), or its time field (``bad_time_field``) or
+        failure data (``wrong_length``) are not ours.
     """
     try:
         tm = Service1Tm.unpack(bytes(packet), ManagedParams(timestamp_len=8),
@@ -156,6 +157,12 @@ def decode_report(packet: bytes) -> VerificationReport:
     if tm.sp_header.apid != REPORT_APID:
         raise PacketError("unknown_apid", f"APID 0x{tm.sp_header.apid:03X}")
     notice = tm.failure_notice
-    return VerificationReport(int(tm.message_subtype), tm.tc_req_id.tc_psc.seq_count, cuc_unpack_ns(tm.timestamp),
+    try:  # found by the fuzzing: a report with a foreign time field raised CucError out of the ground receiver
+        onboard_ns = cuc_unpack_ns(tm.timestamp)
+    except CucError as exc:
+        raise PacketError("bad_time_field", f"verification report: {exc}") from None
+    if notice is not None and len(notice.data) != 2:
+        raise PacketError("wrong_length", f"verification report: failure data of {len(notice.data)} octets, not 2")
+    return VerificationReport(int(tm.message_subtype), tm.tc_req_id.tc_psc.seq_count, onboard_ns,
                               0 if notice is None else int(notice.code.val),
                               0 if notice is None else struct.unpack(">H", notice.data)[0])
