@@ -109,3 +109,17 @@ def assert_corrected_calibration(result, g_true, d_true) -> None:
     nominal = float(np.max(np.abs(calibration_z(result.calibration, g_true, d_true))))
     corrected = float(np.max(np.abs(calibration_z(result.corrected or result.calibration, g_true, d_true))))
     assert corrected < 3.0 and corrected <= nominal + 1.0, (nominal, corrected)
+
+
+#: a short link of fast passes for graph tests (light time 5 s, a 150-s pass every 300 s, 16 kbit/s up); the
+#: onboard memory [octets] is the argument
+FAST_LINK_YAML = """\
+light_time_s: 5.0
+contacts: {period_s: 300.0, first_start_s: 0.0, duration_s: 150.0}
+downlink_rate_bps: 256000.0
+uplink_rate_bps: 16000.0
+packet_overhead_octets: 10
+storage_capacity_octets: %d
+onboard_schedule_capacity: 3000
+command_lead_s: 10.0
+"""

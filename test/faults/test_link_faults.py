@@ -13,18 +13,8 @@ import json
 
 import pytest
 
-from support import run_taiji2
+from support import FAST_LINK_YAML, run_taiji2
 
-FAST_LINK = """\
-light_time_s: 5.0
-contacts: {period_s: 300.0, first_start_s: 0.0, duration_s: 150.0}
-downlink_rate_bps: 256000.0
-uplink_rate_bps: 16000.0
-packet_overhead_octets: 10
-storage_capacity_octets: %d
-onboard_schedule_capacity: 3000
-command_lead_s: 10.0
-"""
 #: telemetry of the run is ~3,100 octets per simulated s: 300 s of it does not fit this memory
 SMALL_MEMORY_OCTETS = 500_000
 
@@ -37,7 +27,7 @@ SMALL_MEMORY_OCTETS = 500_000
 ])
 def test_a_link_fault_ends_with_a_verdict_that_names_it(tmp_path, fault, memory, named):
     link = tmp_path / "link.yaml"
-    link.write_text(FAST_LINK % memory)
+    link.write_text(FAST_LINK_YAML % memory)
     out, bag = tmp_path / "out", tmp_path / "ground"
     # the missed pass's run is recorded on the ground too: calibrate of that recording must give its verdict
     record = ["--record", str(bag)] if named == "missed" else []

@@ -16,23 +16,12 @@ import pytest
 
 from taiji2_runtime.packets.sdls_keys import new_key_table, write_key_file
 
-from support import run_taiji2
-
-FAST_LINK = """\
-light_time_s: 5.0
-contacts: {period_s: 300.0, first_start_s: 0.0, duration_s: 150.0}
-downlink_rate_bps: 256000.0
-uplink_rate_bps: 16000.0
-packet_overhead_octets: 10
-storage_capacity_octets: 1000000000000
-onboard_schedule_capacity: 3000
-command_lead_s: 10.0
-"""
+from support import FAST_LINK_YAML, run_taiji2
 
 
 def _run(tmp_path, name, key_file, *extra):
     link = tmp_path / "link.yaml"
-    link.write_text(FAST_LINK)
+    link.write_text(FAST_LINK_YAML % 10**12)
     out = tmp_path / name
     proc = run_taiji2("experiment", "--link", str(link), "--duration-s", "900", "--key-file", str(key_file),
                       "--out", str(out), *extra, timeout=900)
