@@ -363,8 +363,12 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
             return ExitStatus.BAD_INPUT
     # every relay holds its output until the readers of this graph have matched it (nodes/subscribed_publisher.py):
     # star tracker (scale factors; the paper's d too), GRS (both estimators), executed torque, reception (this
-    # monitor, the planner); the recorder reads every ground topic
+    # monitor, the planner); the recorder reads every ground topic. The uplink's readers onboard: the executor,
+    # and the intruder when there is one; counting only one, the link would open as soon as the intruder had
+    # matched, and the executor, joining later, would miss the first bursts (the tables and the uplink's
+    # horizon) and never command: the simulator, waiting for commands, would crawl
     rec = int(bool(args.record))
+    uplink_readers = 1 + bool(attacks)
     receiver_readers = [1 + (args.method == "paper") + rec, 2 + rec, 2 + rec, rec, 2 + rec]
     commands = {
         "scale_factor_estimator": ["run", "taiji2_estimator_pkg", "scale_factor_estimator", *est_args],
@@ -373,7 +377,7 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
                             "-p", f"wait_for_subscribers:={receiver_readers}"],
         "space_link": ["run", "taiji2_sim_pkg", "space_link", "--ros-args", "-p", f"model:={args.link}",
                        "-p", f"seed:={link_seed}", "-p", f"missed_contacts:={[*missed, -1]}",
-                       "-p", f"lost_uplinks:={[*lost_up, -1]}", "-p", f"wait_for_subscribers:={[1 + rec, 1]}"],
+                       "-p", f"lost_uplinks:={[*lost_up, -1]}", "-p", f"wait_for_subscribers:={[1 + rec, uplink_readers]}"],
         "telemetry_packetizer": ["run", "taiji2_sim_pkg", "telemetry_packetizer", "--ros-args", "-r",
                                  "__ns:=/onboard", "-p", f"end_of_data_s:={duration_s}",
                                  "-p", "command_reports:=true", "-p", "wait_for_subscribers:=[1]"],
