@@ -168,12 +168,7 @@ def test_diagnose_says_no_such_bag_as_the_other_verbs(tmp_path):
 
 # -- row 5: progress on stderr ----------------------------------------------------------------------------
 
-def test_plot_says_what_it_does_on_stderr_and_prints_only_the_files(tmp_path):
-    proc = _taiji2("plot", "--duration-s", "200", "--out", str(tmp_path))
-    assert proc.returncode == 0, proc.stderr
-    for stage in ("simulating", "running the estimators", "drawing the figures", "done"):
-        assert stage in proc.stderr
-    assert all(line.endswith(".png") for line in proc.stdout.splitlines())
+# test_plot_cli.py checks it on its plot run (one plot run in the suite, not two)
 
 
 # -- row 6: output that says what it is -------------------------------------------------------------------

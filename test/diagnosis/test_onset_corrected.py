@@ -155,6 +155,7 @@ def test_effect_from_the_start_reads_onset_zero():
     assert onset["value"] - float(inp.t_s[0]) < 3.0 * onset["sigma"], onset
 
 
+@pytest.mark.long  # CI time (27 s): the mid-run cross coupling above keeps a family named in CI
 def test_a_full_cross_coupling_of_one_grs_is_named_as_one_family():
     """Misalignment about three axes and electrode imbalance of three pairs of GRS 1 (six parameters):
     selection takes four variants (its physical budget), the family as one candidate (six parameters in

@@ -64,6 +64,7 @@ def test_reference_latency_configured_is_no_gap(latency_data):
     assert result.verdict["summary"] == "no significant gap", result.verdict["summary"]
 
 
+@pytest.mark.long  # CI time (35 s): the reference-latency tests above keep a timing effect named and sized in CI
 def test_latency_and_lag_are_fitted_jointly():
     """A command latency and a thruster lag together (reference fidelity, 1 h, the readout unclipped: the
     paper's preset leaves the GRS range, and clipped samples are transients of their own): the delay and
@@ -91,6 +92,7 @@ def test_latency_and_lag_are_fitted_jointly():
     _assert_corrected(result, data_config)
 
 
+@pytest.mark.long  # CI time (37 s): test_diagnose.py's time_offset case names a GRS time offset in CI
 def test_start_stamp_convention_is_a_grs_time_offset():
     # GRS stamped at the start of its integration interval: every GRS sample is 0.1 s early for the
     # nominal ("end") model, i.e. a GRS time offset of -0.1 s (docs/interfaces.md)

@@ -121,6 +121,7 @@ EXPECTED_AFTER_STALL = {"spacecraft_sim": "paused", "maneuver_commander": "comma
                         "scale_factor_estimator": "paused", "com_offset_estimator": "paused"}
 
 
+@pytest.mark.long  # CI time: test_each_node_killed_and_restarted and test_slow_peer.py cover dead and slow peers
 def test_each_node_stopped_for_5_s_then_continued(graph_context, tmp_path, reference):
     graph = Graph(tmp_path, graph_context)
     graph.start()
