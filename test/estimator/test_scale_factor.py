@@ -19,7 +19,7 @@ def _per_sample(est, out, rows=slice(None), columns=(0, 1)):
     return reports
 
 
-@pytest.mark.parametrize("grs_ids", [(1, 2), (2,)])
+@pytest.mark.parametrize("grs_ids", [(1, 2), pytest.param((2,), marks=pytest.mark.long)])  # one GRS: long (CI time)
 def test_recursive_equals_bulk(grs_ids):
     # tolerance: 1e-9 relative on G (rounding of different summation orders)
     config, out = simulate("type1", 1200.0, 7)

@@ -1,4 +1,5 @@
-"""Raw data as the ground holds it, whatever its form: a ROS 2 bag or CCSDS packet files.
+"""Raw data as the ground holds it, whatever its form: a ROS 2 bag, CCSDS packet files, or the packets a Yamcs
+instance archived (``yamcs://HOST:PORT/INSTANCE``).
 
 Real mission data arrive as packets; recorded experiments as bags. :func:`load_raw_data` recognises the
 form by content and returns the same arrays either way, so ``taiji2 calibrate`` and ``taiji2 diagnose``
@@ -12,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from taiji2_estimator_pkg.io.raw_bag import RawBagError, RawExperiment, load_raw_bag
-from taiji2_ground_pkg.raw_packets import load_raw_packets
+from taiji2_ground_pkg.raw_packets import load_raw_archive, load_raw_packets
 from taiji2_model.contract import RAW_TOPICS
 from taiji2_runtime.packets.files import is_packet_path
 
@@ -28,7 +29,7 @@ def load_raw_data(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPIC
     Parameters
     ----------
     path : str or pathlib.Path
-        Bag directory or file, or packet file or directory.
+        Bag directory or file, packet file or directory, or a Yamcs address (``yamcs://...``).
     required : iterable of str
         Raw topics that must be present with usable messages (default: all four of the contract).
     correlation : taiji2_runtime.packets.time_correlation.TimeCorrelation, optional
@@ -40,6 +41,10 @@ def load_raw_data(path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPIC
     taiji2_estimator_pkg.io.raw_bag.RawBagError
         (a ValueError) naming the file and the problem.
     """
+    from taiji2_ground_pkg.mcs.yamcs_api import is_yamcs_url
+
+    if is_yamcs_url(str(path)):
+        return load_raw_archive(str(path), required=required, correlation=correlation)
     if is_packet_path(Path(path)):
         return load_raw_packets(path, required=required, correlation=correlation)
     try:

@@ -26,7 +26,7 @@ from taiji2_estimator_pkg.io.raw_bag import (
 )
 from taiji2_model.contract import COMMAND_TOPIC, GRS_IDS, RAW_FRAME_IDS, RAW_TOPICS, STAR_TRACKER_TOPIC
 
-__all__ = ["load_raw_packets", "time_correlation_from"]
+__all__ = ["load_raw_archive", "load_raw_packets", "raw_from_decoded", "time_correlation_from"]
 
 _NS = 1_000_000_000
 _DROPPED = {"crc_error": "crc_error", "truncated": "truncated", "wrong_length": "wrong_length",
@@ -62,11 +62,41 @@ def load_raw_packets(path: str | Path, *, required: Iterable[str] = tuple(RAW_TO
     from taiji2_runtime.packets.files import PacketFileError, read_packets
 
     path = Path(path)
-    required = list(required)
     try:
         decoded = read_packets(path, correlation)
     except PacketFileError as exc:
         raise RawBagError(exc.path, exc.problem) from None
+    return raw_from_decoded(decoded, path, required=required)
+
+
+def load_raw_archive(url: str, *, required: Iterable[str] = tuple(RAW_TOPICS), correlation: Any = None) -> RawExperiment:
+    """Load the packets a Yamcs instance archived (``yamcs://HOST:PORT/INSTANCE[?start=...&stop=...]``),
+    decoded by the project's own decoder exactly as a packet file (Yamcs's own decoding is not used: the
+    calibration reads the raw octets). ``correlation`` default: the identity.
+
+    Raises
+    ------
+    RawBagError
+        One line naming the address and the problem (unreachable, no such instance, nothing sound).
+    """
+    from taiji2_ground_pkg.mcs.errors import GroundError
+    from taiji2_ground_pkg.mcs.yamcs_api import archived_packets
+    from taiji2_runtime.packets.bulk_decode import decode_packet_buffers
+    from taiji2_runtime.packets.time_correlation import TimeCorrelation
+
+    try:
+        packets = archived_packets(url)
+    except GroundError as exc:
+        raise RawBagError(url, str(exc).removeprefix(f"{url}: ")) from None
+    if not packets:
+        raise RawBagError(url, "the archive holds no packets (in that time range)")
+    decoded = decode_packet_buffers([(url, b"".join(packets))], correlation or TimeCorrelation())
+    return raw_from_decoded(decoded, url, required=required)
+
+
+def raw_from_decoded(decoded: Any, path: str | Path, *, required: Iterable[str] = tuple(RAW_TOPICS)) -> RawExperiment:
+    """The :class:`RawExperiment` of decoded packets (``storage == "ccsds"``); ``path`` names their source."""
+    required = list(required)
     streams = dict(decoded.streams)
     if "executed_torque" not in streams and decoded.telecommands is not None:
         streams["executed_torque"] = decoded.telecommands
