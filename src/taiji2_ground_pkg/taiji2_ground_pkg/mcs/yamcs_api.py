@@ -1,0 +1,144 @@
+"""What the ground reads from a running Yamcs through its HTTP API (``yamcs-client``): the instance's state,
+and the raw packets of the archive for calibration.
+
+A Yamcs address is ``yamcs://HOST:PORT/INSTANCE`` with an optional time range of packet generation times,
+``?start=ISO&stop=ISO`` (UTC, e.g. ``2035-01-01T00:10:00Z``; start inclusive, stop exclusive). Where Yamcs
+runs with authentication, the user and password come from the environment (``YAMCS_USER``,
+``YAMCS_PASSWORD``), never from the command line, which other users of the machine can read.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+from dataclasses import dataclass
+from urllib.parse import parse_qs, urlsplit
+
+from taiji2_ground_pkg.mcs.errors import GroundError
+
+__all__ = ["YamcsAddress", "archived_packets", "connect_station_link", "instance_state", "is_yamcs_url",
+           "link_counts", "parse_yamcs_url"]
+
+_SCHEME = "yamcs"
+
+
+@dataclass(frozen=True)
+class YamcsAddress:
+    """A parsed ``yamcs://`` address: the server, the instance, the generation-time range (UTC)."""
+
+    server: str  # "host:port"
+    instance: str
+    start: dt.datetime | None = None
+    stop: dt.datetime | None = None
+
+
+def is_yamcs_url(text: str) -> bool:
+    """Whether ``text`` names a Yamcs instance (``yamcs://...``), not a file."""
+    return str(text).startswith(f"{_SCHEME}://")
+
+
+def _time(url: str, key: str, values: list[str]) -> dt.datetime:
+    text = values[-1]
+    try:
+        t = dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError as exc:
+        raise GroundError(f"{url}: {key}={text!r} is not an ISO 8601 time (e.g. 2035-01-01T00:10:00Z)") from exc
+    if t.tzinfo is None:
+        raise GroundError(f"{url}: {key}={text!r} has no time zone; write it in UTC with a Z")
+    return t.astimezone(dt.timezone.utc)
+
+
+def parse_yamcs_url(url: str) -> YamcsAddress:
+    """The address of ``yamcs://HOST:PORT/INSTANCE[?start=ISO&stop=ISO]``; GroundError naming what is wrong."""
+    parts = urlsplit(url)
+    if parts.scheme != _SCHEME or not parts.hostname or parts.port is None:
+        raise GroundError(f"{url}: not a Yamcs address; expected yamcs://HOST:PORT/INSTANCE")
+    instance = parts.path.strip("/")
+    if not instance or "/" in instance:
+        raise GroundError(f"{url}: name one Yamcs instance after the port, e.g. yamcs://127.0.0.1:8090/taiji2")
+    query = parse_qs(parts.query, keep_blank_values=True)
+    unknown = sorted(set(query) - {"start", "stop"})
+    if unknown:
+        raise GroundError(f"{url}: unknown option(s) {', '.join(unknown)}; the options are start and stop")
+    start = _time(url, "start", query["start"]) if "start" in query else None
+    stop = _time(url, "stop", query["stop"]) if "stop" in query else None
+    if start is not None and stop is not None and stop <= start:
+        raise GroundError(f"{url}: stop is not after start")
+    return YamcsAddress(f"{parts.hostname}:{parts.port}", instance, start, stop)
+
+
+def _client(server: str):  # noqa: ANN202 (yamcs.client.YamcsClient, imported late)
+    from yamcs.client import Credentials, YamcsClient
+
+    user, password = os.environ.get("YAMCS_USER"), os.environ.get("YAMCS_PASSWORD")
+    credentials = Credentials(username=user, password=password) if user and password else None
+    return YamcsClient(server, credentials=credentials)
+
+
+def instance_state(http_port: int, instance: str = "taiji2", host: str = "127.0.0.1") -> str | None:
+    """The state of ``instance`` (``RUNNING`` when ready), or None while the server does not answer."""
+    import requests
+
+    try:
+        client = _client(f"{host}:{http_port}")
+        try:
+            states = {i.name: i.state for i in client.list_instances()}
+        finally:
+            client.close()
+    except (requests.exceptions.RequestException, OSError):
+        return None
+    except Exception as exc:  # yamcs-client's own errors (a server still starting answers 503)
+        if type(exc).__module__.startswith("yamcs"):
+            return None
+        raise
+    return states.get(instance)
+
+
+def archived_packets(url: str) -> list[bytes]:
+    """The raw packets that Yamcs archived at ``url`` (its time range, if any), in the archive's order
+    (generation time, then sequence count); GroundError naming the address when it cannot be read."""
+    address = parse_yamcs_url(url)
+    try:
+        client = _client(address.server)
+        try:
+            names = {i.name for i in client.list_instances()}
+            if address.instance not in names:
+                raise GroundError(f"{url}: no instance {address.instance!r} on {address.server} "
+                                  f"(it has {', '.join(sorted(names)) or 'none'})")
+            archive = client.get_archive(address.instance)
+            return [bytes(p.binary) for p in archive.stream_packets(start=address.start, stop=address.stop)]
+        finally:
+            client.close()
+    except GroundError:
+        raise
+    except Exception as exc:
+        raise GroundError(f"{url}: cannot read the Yamcs archive: {type(exc).__name__}: {exc}") from exc
+
+
+def connect_station_link(url: str, link: str = "ground-station") -> None:
+    """Ask the instance at ``url`` to connect its ground station link now (disable, then enable: the link
+    opens its connection when enabled) rather than at its next retry; GroundError naming the address."""
+    address = parse_yamcs_url(url)
+    try:
+        client = _client(address.server)
+        try:
+            link_client = client.get_link(address.instance, link)
+            link_client.disable_link()
+            link_client.enable_link()
+        finally:
+            client.close()
+    except Exception as exc:
+        raise GroundError(f"{url}: cannot reach link {link!r}: {type(exc).__name__}: {exc}") from exc
+
+
+def link_counts(url: str, link: str = "ground-station") -> tuple[int, str]:
+    """Packets the link has read so far and its status (e.g. ``OK``), through the API."""
+    address = parse_yamcs_url(url)
+    client = _client(address.server)
+    try:
+        info = next((lk for lk in client.list_links(address.instance) if lk.name == link), None)
+    finally:
+        client.close()
+    if info is None:
+        raise GroundError(f"{url}: the instance has no link {link!r}")
+    return int(info.in_count), str(info.status)

