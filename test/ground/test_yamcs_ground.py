@@ -113,6 +113,13 @@ def test_bad_addresses_are_one_line_naming_the_address(yamcs):
     other = yamcs.url.replace("/taiji2", "/nosuch")
     with pytest.raises(ValueError, match="no instance 'nosuch'"):
         load_raw_data(other)
+    # through the command line: one line naming the address as given, exit status 2
+    silent = f"yamcs://127.0.0.1:{_free_port()}/taiji2"
+    proc = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "calibrate", silent], env=python_subprocess_env(),
+                          capture_output=True, text=True, timeout=120)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert lines[0].startswith(f"error: taiji2 calibrate: {silent}: cannot read the Yamcs archive: "), lines[0]
 
 
 def test_serve_prints_the_address_once_ready_and_stops_cleanly_on_sigterm(tmp_path):

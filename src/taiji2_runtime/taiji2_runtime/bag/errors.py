@@ -19,4 +19,5 @@ class BagError(ValueError):
     def __init__(self, path: str | Path, problem: str) -> None:
         self.path = Path(path)
         self.problem = " ".join(str(problem).split())
-        super().__init__(f"{self.path}: {self.problem}")
+        # an address (yamcs://...) is named as given: a Path would fold its "//"
+        super().__init__(f"{path if '://' in str(path) else self.path}: {self.problem}")
