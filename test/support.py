@@ -123,3 +123,26 @@ storage_capacity_octets: %d
 onboard_schedule_capacity: 3000
 command_lead_s: 10.0
 """
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now (for a test's own Yamcs)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def running_yamcs(data_dir: Path) -> Iterator[object]:
+    """A Yamcs server of the project's instance on ``data_dir`` (free ports), ready, stopped at the end."""
+    from taiji2_ground_pkg.mcs.yamcs_server import YamcsServer
+
+    server = YamcsServer(data_dir, http_port=free_port(), station_port=free_port())
+    server.start()
+    try:
+        server.wait_ready()
+        yield server
+    finally:
+        server.stop()

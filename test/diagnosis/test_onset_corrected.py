@@ -144,6 +144,7 @@ def test_extended_layout_reads_no_significant_gap(mid_run):
     assert again.verdict["summary"] == "no significant gap", again.verdict["summary"]
 
 
+@pytest.mark.long  # CI time (13 s): test_mid_run_effect_is_named_with_its_onset keeps the onset fit in CI
 def test_effect_from_the_start_reads_onset_zero():
     """A misalignment present from the start: its onset is not modelled and reads 0 within 3 sigma."""
     config, inp = _data([{"name": "cross_coupling", "grs": 2, "misalignment_rad": [0, 0, 3e-3]}], seed=21)

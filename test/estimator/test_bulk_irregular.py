@@ -54,7 +54,8 @@ def _count_steps(monkeypatch):
     return calls
 
 
-@pytest.mark.parametrize("rejections", [False, True], ids=["clean", "rejections"])
+# clean long for CI time: the rejections case compares the same two paths, with rejections on top
+@pytest.mark.parametrize("rejections", [pytest.param(False, marks=pytest.mark.long), True], ids=["clean", "rejections"])
 def test_bulk_equals_node_path_on_foreign_conventions(monkeypatch, rejections):
     # tolerance: 1e-6 sigma (what "the same estimate" has to mean; rounding is ~1e-9 sigma)
     config, out = simulate("type1", 1500.0, 11)

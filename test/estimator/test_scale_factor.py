@@ -40,6 +40,7 @@ def test_recursive_equals_bulk(grs_ids):
     assert 0.95 < bulk.nis_mean < 1.05
 
 
+@pytest.mark.long  # CI time (14 s): test_restart_exact.py restores a checkpoint exactly in CI
 def test_checkpoint_resume_mid_run():
     config, out = simulate("type1", 900.0, 8)
     instrument = InstrumentModel.from_layout(config)

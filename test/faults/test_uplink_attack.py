@@ -3,7 +3,7 @@ replays of genuine ones, genuine ones with a bit flipped, tables signed with a r
 garbage. Every attack frame is refused onboard with its reason and counted; the planner's tables are accepted
 and fly as planned; the estimates equal those of the same run without the intruder.
 
-The short link of test_link_faults.py (fast passes, 900 s of data); the same seed for both runs, so that the
+The short link of test_link_faults.py (fast passes, 600 s of data); the same seed for both runs, so that the
 spacecraft, the link and the estimators see the same data unless an attack frame were executed.
 """
 
@@ -23,7 +23,7 @@ def _run(tmp_path, name, key_file, *extra):
     link = tmp_path / "link.yaml"
     link.write_text(FAST_LINK_YAML % 10**12)
     out = tmp_path / name
-    proc = run_taiji2("experiment", "--link", str(link), "--duration-s", "900", "--key-file", str(key_file),
+    proc = run_taiji2("experiment", "--link", str(link), "--duration-s", "600", "--key-file", str(key_file),
                       "--out", str(out), *extra, timeout=900)
     assert proc.returncode in (0, 3), proc.stderr[-3000:]
     return json.loads((out / "results.json").read_text()), proc.stdout

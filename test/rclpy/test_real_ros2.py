@@ -13,6 +13,7 @@ ALL_EXECUTABLES = {"taiji2_sim_pkg spacecraft_sim", "taiji2_sim_pkg maneuver_com
                    "taiji2_sim_pkg telemetry_packetizer", "taiji2_sim_pkg space_link",
                    "taiji2_sim_pkg onboard_executor", "taiji2_sim_pkg uplink_intruder",
                    "taiji2_ground_pkg ground_receiver", "taiji2_ground_pkg command_planner",
+                   "taiji2_ground_pkg yamcs_station",
                    "taiji2_estimator_pkg scale_factor_estimator", "taiji2_estimator_pkg com_offset_estimator"}
 
 

@@ -126,7 +126,7 @@ def main(args: argparse.Namespace) -> int:
         if args.record and Path(args.record).exists():
             raise ValueError(f"--record {args.record}: already exists; choose another output or remove it")
         link_only = [o for o, v in (("--link-fault", args.link_fault), ("--key-file", args.key_file),
-                                     ("--uplink-attack", args.uplink_attack)) if v]
+                                     ("--uplink-attack", args.uplink_attack), ("--ground", args.ground)) if v]
         if link_only and not args.link:
             raise ValueError(f"{', '.join(link_only)}: only with --link (the direct run has no uplink)")
     except ValueError as exc:

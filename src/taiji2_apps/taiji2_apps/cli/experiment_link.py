@@ -45,6 +45,13 @@ def add_link_arguments(parser: argparse.ArgumentParser) -> None:
                         help="an intruder on the uplink during the run (testing command security, docs/security.md): "
                              "all, or comma-separated forged, replay, bit_flip, revoked, garbage; the results say "
                              "what it sent and what the spacecraft refused")
+    parser.add_argument("--ground", default="", metavar="URL",
+                        help="the ground station on Yamcs: the Yamcs instance (yamcs://HOST:PORT/INSTANCE, started "
+                             "with taiji2 ground serve) that archives every packet the ground receives "
+                             "(docs/operations.md); default: none")
+    parser.add_argument("--station-port", type=int, default=10015, metavar="PORT",
+                        help="with --ground: the port the instance's ground-station link connects to "
+                             "(taiji2 ground serve --station-port; default 10015)")
 
 
 def estimate_stamps_ns(msg: Any) -> tuple[int, int]:
@@ -104,6 +111,7 @@ class LinkMonitor:
         self.reception: list[dict[str, Any]] = []
         self.link_report: dict[str, Any] | None = None
         self.intruder: dict[str, Any] | None = None
+        self.station: dict[str, Any] | None = None
         self.diagnostics: dict[str, Any] = {}
         self.faults_seen: dict[str, str] = {}
         s = messages.std_msgs.String
@@ -112,6 +120,8 @@ class LinkMonitor:
         node.create_subscription(s, "/taiji2/sim/link_report", self._counted(self._on_report), latched)
         node.create_subscription(s, "/taiji2/sim/intruder_report", self._counted(
             lambda m: setattr(self, "intruder", json.loads(m.data))), latched)
+        node.create_subscription(s, "/ground/yamcs_station", self._counted(
+            lambda m: setattr(self, "station", json.loads(m.data))), latched)
         self.plan: list[dict[str, Any]] | None = None
         node.create_subscription(s, "/ground/commanding/plan", self._counted(
             lambda m: setattr(self, "plan", json.loads(m.data))), latched)
@@ -271,6 +281,10 @@ def format_link_report(link: dict[str, Any]) -> str:
         from taiji2_apps.cli.experiment_attack import format_attacks
 
         lines.append(format_attacks(link["attacks"]))
+    if link.get("yamcs"):
+        from taiji2_apps.cli.experiment_ground import format_ground
+
+        lines.append(format_ground(link["yamcs"]))
     faults = link["faults"]
     lines.append("Link faults: " + ("; ".join(f"{k}: {v}" for k, v in faults.items()) if faults else "none"))
     return "\n".join(lines)
@@ -342,6 +356,13 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
               f"onboard ({start_s:g} s)", file=sys.stderr)
         return ExitStatus.BAD_INPUT
     from taiji2_apps.cli.experiment_attack import attack_kinds, leaked_key_file
+    from taiji2_apps.cli.experiment_ground import ground_problem, link_count
+
+    problem = ground_problem(args.ground, args.station_port) if args.ground else None
+    if problem:
+        print(f"error: taiji2 experiment: {problem}", file=sys.stderr)
+        return ExitStatus.BAD_INPUT
+    yamcs_count_before = link_count(args.ground) if args.ground else 0
 
     try:
         attacks = attack_kinds(args.uplink_attack) if args.uplink_attack else []
@@ -369,6 +390,9 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
     # horizon) and never command: the simulator, waiting for commands, would crawl
     rec = int(bool(args.record))
     uplink_readers = 1 + bool(attacks)
+    # what the ground station receives: the receiver, the recorder's not (it records the ground topics after
+    # the receiver), and the Yamcs station when there is one
+    downlink_readers = 1 + rec + bool(args.ground)
     receiver_readers = [1 + (args.method == "paper") + rec, 2 + rec, 2 + rec, rec, 2 + rec]
     commands = {
         "scale_factor_estimator": ["run", "taiji2_estimator_pkg", "scale_factor_estimator", *est_args],
@@ -378,7 +402,7 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         "space_link": ["run", "taiji2_sim_pkg", "space_link", "--ros-args", "-p", f"model:={args.link}",
                        "-p", f"seed:={link_seed}", "-p", f"missed_contacts:={[*missed, -1]}",
                        "-p", f"lost_uplinks:={[*lost_up, -1]}",
-                       "-p", f"wait_for_subscribers:={[1 + rec, uplink_readers]}"],
+                       "-p", f"wait_for_subscribers:={[downlink_readers, uplink_readers]}"],
         "telemetry_packetizer": ["run", "taiji2_sim_pkg", "telemetry_packetizer", "--ros-args", "-r",
                                  "__ns:=/onboard", "-p", f"end_of_data_s:={duration_s}",
                                  "-p", "command_reports:=true", "-p", "wait_for_subscribers:=[1]"],
@@ -398,6 +422,9 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         commands["uplink_intruder"] = ["run", "taiji2_sim_pkg", "uplink_intruder", "--ros-args",
                                        "-p", f"attacks:={attacks}", "-p", f"leaked_key_file:={leaked}",
                                        "-p", f"seed:={args.seed}"]
+    if args.ground:
+        commands["yamcs_station"] = ["run", "taiji2_ground_pkg", "yamcs_station", "--ros-args", "-r", "__ns:=/ground",
+                                     "-p", f"station_port:={args.station_port}"]
     nodes = [NodeProcess.taiji2(name, argv) for name, argv in commands.items()]
     nodes.append(NodeProcess.taiji2("spacecraft_sim", [
         "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard", *onboard_remaps, *source,
@@ -429,6 +456,8 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         d_target = max((through.get(k) or 0 for k in ("grs1", "grs2")), default=0)
         if not all(monitor.stamps_ns(t)[0] >= sf_target * _NS - 1000 for t in sf_topics):
             return False
+        if args.ground and not (monitor.station and monitor.station["end_of_data"] and monitor.station["queued"] == 0):
+            return False  # the Yamcs station still has packets to hand over
         if not monitor.scale_factors_determined() and all(monitor.latest.get(t) is None for t in d_topics):
             return True  # G undetermined on all the data (e.g. no maneuver flown): no d can come; the verdict says
         return all(data >= d_target * _NS - 1000 and g >= sf_target * _NS - 1000
@@ -461,14 +490,15 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         remove_leaked()
 
     return run_to_status(graph, lambda result: _report(args, plan, model, link_seed, monitor, out, duration_s,
-                                                       result.wall_s, temporary), cleanup)
+                                                       result.wall_s, temporary, yamcs_count_before), cleanup)
 
 
 def _report(args: argparse.Namespace, plan: Any, model: Any, link_seed: int, monitor: LinkMonitor, out: Path,
-            duration_s: float, elapsed: float, temporary: bool) -> int:
+            duration_s: float, elapsed: float, temporary: bool, yamcs_count_before: int = 0) -> int:
     """Print the final estimates, the link report and the verdict, write results.json; returns 0 (every
     requirement met) or 3. The estimate table, the requirement section and the verdict are one evaluation
-    (:func:`~taiji2_apps.experiment_setup.experiment_verdict`), as in the direct run."""
+    (:func:`~taiji2_apps.experiment_setup.experiment_verdict`), as in the direct run. ``yamcs_count_before``:
+    the Yamcs link's packet count before the run (with ``--ground``)."""
     from taiji2_apps.experiment_setup import experiment_verdict
     from taiji2_estimator_pkg.report import EstimateTable, format_table
 
@@ -503,6 +533,10 @@ def _report(args: argparse.Namespace, plan: Any, model: Any, link_seed: int, mon
         from taiji2_apps.cli.experiment_attack import attack_summary
 
         link["attacks"] = attack_summary(monitor.intruder, monitor.diagnostics)
+    if args.ground:
+        from taiji2_apps.cli.experiment_ground import ground_summary
+
+        link["yamcs"] = ground_summary(args.ground, monitor.station, yamcs_count_before)
     if link["commanding"]["lost_on_uplink"]:
         faults["command table lost on uplink"] = ("TC[11,4] #" + ", #".join(
             map(str, link["commanding"]["lost_on_uplink"])) + " never acknowledged")

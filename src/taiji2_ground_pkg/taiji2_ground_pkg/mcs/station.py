@@ -4,11 +4,13 @@ Space Packets the ground received, in reception order.
 Yamcs's ``TcpTcTmDataLink`` is a TCP client (it connects to a ground station or an SLE provider and
 retries while it cannot); this is the server side. Packets are queued and written by a thread of their
 own, so a slow Yamcs never blocks the caller (a node's executor); while Yamcs is not connected (not yet,
-or restarting) they wait in the queue, in order, and go out when it connects: nothing received is lost.
-Packets go out in batches of up to ``BATCH`` (one system call each); a connection that breaks mid-batch
-is closed and the batch is sent again, whole, on the next one (Yamcs reads packets by their length
-field, so a half packet would desynchronise it; what Yamcs had read of the batch comes twice, and the
-archive keeps one copy of a packet per generation time and sequence count).
+or restarting) they wait in the queue, in order, and go out when it connects. Packets go out in batches of
+up to ``BATCH`` (one system call each); a batch whose write fails is sent again, whole, on the next
+connection (Yamcs reads packets by their length field, so a half packet would desynchronise it; the archive
+keeps one copy of a packet per generation time and sequence number). TCP has no receipt: what was written
+to a connection that Yamcs then closed without reading it is lost, so :attr:`sent_packets` counts what
+was written, and whoever needs the count of what arrived asks Yamcs (its link's count;
+``taiji2 experiment --ground`` compares the two).
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from urllib.parse import parse_qs, urlsplit
 
 from taiji2_ground_pkg.mcs.errors import GroundError
 
-__all__ = ["YamcsAddress", "archived_packets", "connect_station_link", "instance_state", "is_yamcs_url",
+__all__ = ["YamcsAddress", "archived_packets", "instance_state", "is_yamcs_url",
            "link_counts", "parse_yamcs_url"]
 
 _SCHEME = "yamcs"
@@ -113,22 +113,6 @@ def archived_packets(url: str) -> list[bytes]:
         raise
     except Exception as exc:
         raise GroundError(f"{url}: cannot read the Yamcs archive: {type(exc).__name__}: {exc}") from exc
-
-
-def connect_station_link(url: str, link: str = "ground-station") -> None:
-    """Ask the instance at ``url`` to connect its ground station link now (disable, then enable: the link
-    opens its connection when enabled) rather than at its next retry; GroundError naming the address."""
-    address = parse_yamcs_url(url)
-    try:
-        client = _client(address.server)
-        try:
-            link_client = client.get_link(address.instance, link)
-            link_client.disable_link()
-            link_client.enable_link()
-        finally:
-            client.close()
-    except Exception as exc:
-        raise GroundError(f"{url}: cannot reach link {link!r}: {type(exc).__name__}: {exc}") from exc
 
 
 def link_counts(url: str, link: str = "ground-station") -> tuple[int, str]:

@@ -11,8 +11,7 @@ The instance, as an operator's ground station has it:
 * one data link, ``ground-station`` (Yamcs's ``TcpTcTmDataLink``): Yamcs connects to the ground station
   front end (:mod:`.station`) at ``127.0.0.1:STATION_PORT`` and reads the CCSDS Space Packets the ground
   received, in reception order, on one TCP connection (a busy machine does not drop what TCP carries);
-  telecommands go back on the same connection. Yamcs retries the connection every 10 s, and the front
-  end asks it to connect at once through the API;
+  telecommands go back on the same connection. Yamcs retries the connection every 10 s;
 * the packets' preprocessing: ``GenericPacketPreprocessor`` with the CUC time at offset 6 (its P-field in
   the packet, read by Yamcs), the mission epoch ``MISSION_EPOCH_UTC`` for the onboard clock's zero, the
   APID and sequence count as the archive's sequence number, and the CRC-16-CCITT of the last two octets
