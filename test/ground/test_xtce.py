@@ -17,6 +17,7 @@ from space_packet_parser.xtce.definitions import XtcePacketDefinition
 from space_packet_parser.xtce.validation import validate_xtce
 from spacepackets.ecss.tc import PusTc
 
+from taiji2_ground_pkg.mcs.ground_parameters import parameter_specs
 from taiji2_ground_pkg.mcs.xtce import CRC_PARAMETER, REPORT_CONTAINERS, ROOT_CONTAINER, parameter_name, write_xtce
 from taiji2_runtime.packets.bulk_encode import encode_streams
 from taiji2_runtime.packets.cuc import cuc_decode_ns, cuc_encode, cuc_encode_ns
@@ -71,8 +72,14 @@ def _crc_ok(raw, packet):
 
 
 def test_xtce_is_valid_and_has_every_apid(xtce):
-    assert validate_xtce(xtce, level="all", allow_schema_download=False, print_results=False,
-                         raise_on_error=False), "not valid XTCE 1.2 (XSD bundled with space-packet-parser)"
+    result = validate_xtce(xtce, level="all", allow_schema_download=False, print_results=False,
+                           raise_on_error=False)
+    # the one finding allowed: the ground's local parameters (set through Yamcs's API, no packet carries them)
+    # are "defined but never used" in a container, as they must be
+    local = {spec.name for spec in parameter_specs()}
+    errors = [e for e in result.errors
+              if not (e.error_code == "UNUSED_PARAMETER" and e.message.split("'")[1] in local)]
+    assert not errors, [e.message for e in errors][:5]
     root = ET.parse(xtce).getroot()
     assert root.tag == f"{NS}SpaceSystem" and root.get("name") == "taiji2"
     containers = {c.get("name"): c for c in root.iter(f"{NS}SequenceContainer")}

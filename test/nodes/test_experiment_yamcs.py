@@ -1,6 +1,6 @@
 """A link experiment feeding the ground station's Yamcs (issue 40 items 2-3): every packet the ground receives
-reaches Yamcs's archive through its TCP data link, and the calibration from the archive equals the calibration
-of the ground's recording of the same run.
+reaches Yamcs's archive through its TCP data link, the calibration from the archive equals the calibration
+of the ground's recording of the same run, and the live estimates are Yamcs parameters with their alarms.
 
 The short link of test_link_faults.py (fast passes, 600 s of data); one real Yamcs, started for the module.
 """
@@ -9,7 +9,11 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
+
+from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
+from taiji2_ground_pkg.mcs.yamcs_api import parse_yamcs_url
 
 from support import FAST_LINK_YAML, run_taiji2, running_yamcs
 
@@ -21,6 +25,26 @@ pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-
 def yamcs(tmp_path_factory):
     with running_yamcs(tmp_path_factory.mktemp("yamcs")) as server:
         yield server
+
+
+def _parameters(url):
+    """Every ground parameter's value and monitoring result in the instance's realtime processor."""
+    from yamcs.client import YamcsClient
+
+    from taiji2_ground_pkg.mcs.ground_parameters import parameter_specs
+
+    address = parse_yamcs_url(url)
+    client = YamcsClient(address.server)
+    try:
+        processor = client.get_processor(address.instance, "realtime")
+        found = {}
+        for spec in parameter_specs():
+            pv = processor.get_parameter_value(f"/taiji2/{spec.name}")
+            if pv is not None:
+                found[spec.name] = (pv.eng_value, pv.monitoring_result)
+        return found
+    finally:
+        client.close()
 
 
 def _calibration(source):
@@ -47,6 +71,25 @@ def test_a_link_run_feeds_yamcs_and_its_archive_calibrates_as_the_ground_recordi
     for g in ("grs1", "grs2"):
         for key in ("scale_factors", "scale_factors_cov", "com_offset", "com_offset_cov"):
             assert from_archive[g][key] == from_bag[g][key], (g, key)
+    # the live estimates are Yamcs parameters: the final ones, to the bit, each sigma checked against its
+    # requirement by Yamcs's alarm (WARNING above it)
+    results = json.loads((out / "results.json").read_text())
+    assert ground["station"]["parameter_pushes"] > 0 and ground["station"]["parameter_failures"] == 0, ground
+    values = _parameters(yamcs.url)
+    for g in (1, 2):
+        final = results[f"grs{g}"]
+        for i, axis in enumerate(("Pphi", "Ptheta", "Ppsi")):
+            value, rel = values[f"grs{g}_G_{axis}"], values[f"grs{g}_G_{axis}_rel_sigma"]
+            assert value[0] == final["scale_factors"][i], (g, axis)
+            sigma = np.sqrt(final["scale_factors_cov"][i][i])
+            assert rel[0] == pytest.approx(sigma / abs(final["scale_factors"][i]), rel=1e-12)
+            assert rel[1] == ("WARNING" if rel[0] > SCALE_FACTOR_REQUIREMENT_REL else "IN_LIMITS"), (g, axis, rel)
+        for i, axis in enumerate("xyz"):
+            value, sigma = values[f"grs{g}_d_{axis}"], values[f"grs{g}_d_{axis}_sigma"]
+            assert value[0] == final["com_offset"][i], (g, axis)
+            assert sigma[0] == pytest.approx(np.sqrt(final["com_offset_cov"][i][i]), rel=1e-12)
+            assert sigma[1] == ("WARNING" if sigma[0] > COM_OFFSET_REQUIREMENT_M else "IN_LIMITS"), (g, axis, sigma)
+    assert values["ground_missing_fraction"] == (0.0, "IN_LIMITS")  # this link loses nothing
 
 
 def test_a_ground_url_without_a_running_yamcs_is_one_line_before_any_node(tmp_path):

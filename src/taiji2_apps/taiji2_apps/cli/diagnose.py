@@ -75,8 +75,8 @@ def _load_npz(path: Path, sample_rate_hz: float) -> Any:
     return prepare_input(data["t_s"], data["st_quat_xyzw"], data["voltages_v"], data["torque_cmd_n_m"], rate)
 
 
-def _load_bag(path: Path, sample_rate_hz: float, correlation: Any = None) -> tuple[Any, Any]:
-    """The diagnosis input of a bag or packets, and the raw experiment it came from."""
+def _load_bag(path: Path | str, sample_rate_hz: float, correlation: Any = None) -> tuple[Any, Any]:
+    """The diagnosis input of a bag, packets or a Yamcs archive, and the raw experiment it came from."""
     from taiji2_estimator_pkg.diagnosis import align_streams
     from taiji2_ground_pkg.raw_data import load_raw_data
 
@@ -149,12 +149,15 @@ def _main(args: argparse.Namespace) -> int:
     if args.orbit_period_s is not None:
         overrides["orbit_period_s"] = args.orbit_period_s
     options = DiagnosisOptions(**overrides)
-    path = Path(args.bag)
-    if not path.exists():
+    from taiji2_ground_pkg.mcs.yamcs_api import is_yamcs_url
+
+    # a Yamcs archive (yamcs://...) is an address, not a path (a Path would fold its "//")
+    path: Any = args.bag if is_yamcs_url(args.bag) else Path(args.bag)
+    if isinstance(path, Path) and not path.exists():
         raise ValueError(f"{path}: no such bag (the path does not exist)")
     progress(f"reading {path}")
     raw = None
-    if path.suffix == ".npz":
+    if isinstance(path, Path) and path.suffix == ".npz":
         inp = _load_npz(path, config.sample_rate_hz)
     else:
         from taiji2_ground_pkg.raw_packets import time_correlation_from

@@ -424,7 +424,7 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
                                        "-p", f"seed:={args.seed}"]
     if args.ground:
         commands["yamcs_station"] = ["run", "taiji2_ground_pkg", "yamcs_station", "--ros-args", "-r", "__ns:=/ground",
-                                     "-p", f"station_port:={args.station_port}"]
+                                     "-p", f"station_port:={args.station_port}", "-p", f"yamcs_url:={args.ground}"]
     nodes = [NodeProcess.taiji2(name, argv) for name, argv in commands.items()]
     nodes.append(NodeProcess.taiji2("spacecraft_sim", [
         "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard", *onboard_remaps, *source,

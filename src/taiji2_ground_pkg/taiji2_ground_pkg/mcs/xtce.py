@@ -20,6 +20,9 @@ Telecommands (``MetaCommand``, PUS-C TC secondary header, APID 0x140): ``set_tor
 execution time, torque [N m], force [N]) and ``insert_activities`` (TC[11,4]: N, then N activities,
 each its release time and its request, a whole TC[130,1] as 69 octets of binary).
 
+The ground's own results (:mod:`.ground_parameters`: G and d of both GRS with their sigma, the link's
+health) are local parameters with alarm ranges, set through Yamcs's API.
+
 What XTCE (as pymdb writes it) does not carry, and who does it instead: the CRC is a plain 16-bit
 parameter, checked by the receiving link (Yamcs: the packet preprocessor's ``errorDetection``
 ``CRC-16-CCIIT``; a reader of this file: compare it with the CRC of the octets before it); a TC's
@@ -59,6 +62,7 @@ from yamcs.pymdb import (
     eq,
 )
 
+from taiji2_ground_pkg.mcs.ground_parameters import add_ground_parameters
 from taiji2_runtime.packets import definition as d
 from taiji2_runtime.packets import scheduling, telecommand
 
@@ -241,6 +245,7 @@ def build_system() -> System:
                                                    "(docs/interfaces.md, CCSDS Space Packets)")
     _telemetry(system)
     _telecommands(system)
+    add_ground_parameters(system)
     return system
 
 

@@ -17,7 +17,7 @@ from urllib.parse import parse_qs, urlsplit
 from taiji2_ground_pkg.mcs.errors import GroundError
 
 __all__ = ["YamcsAddress", "archived_packets", "instance_state", "is_yamcs_url",
-           "link_counts", "parse_yamcs_url"]
+           "link_counts", "parse_yamcs_url", "set_parameters"]
 
 _SCHEME = "yamcs"
 
@@ -126,3 +126,20 @@ def link_counts(url: str, link: str = "ground-station") -> tuple[int, str]:
     if info is None:
         raise GroundError(f"{url}: the instance has no link {link!r}")
     return int(info.in_count), str(info.status)
+
+
+def set_parameters(url: str, values: dict[str, float], processor: str = "realtime") -> None:
+    """Set local parameters (names without the space system: ``grs1_G_Pphi``) of the instance at ``url``;
+    GroundError naming the address when Yamcs refuses or does not answer."""
+    from taiji2_ground_pkg.mcs.xtce import SYSTEM_NAME
+
+    address = parse_yamcs_url(url)
+    try:
+        client = _client(address.server)
+        try:
+            client.get_processor(address.instance, processor).set_parameter_values(
+                {f"/{SYSTEM_NAME}/{name}": value for name, value in values.items()})
+        finally:
+            client.close()
+    except Exception as exc:
+        raise GroundError(f"{url}: cannot set parameters: {type(exc).__name__}: {exc}") from exc

@@ -7,9 +7,16 @@ Yamcs's link is the TCP client: the node listens on ``station_port`` and Yamcs c
 (every 10 s). Packets received before Yamcs connects, or while it reconnects, wait in order. (Asking Yamcs
 through its API to reconnect at once, by disabling and enabling the link, made it open a second connection
 over the first in one run of test_experiment_yamcs.py, and what was in flight on the first, 37 packets, was
-lost: the node does not ask.) Its account goes on
-``/diagnostics`` once a second (packets received, sent to Yamcs, queued; Yamcs connected) and, at the
-end of the data, on ``/ground/yamcs_station`` (latched JSON). Parameters: ``config/yamcs_station.yaml``.
+lost: the node does not ask.)
+
+With ``yamcs_url`` set, it also sets the ground's parameters in Yamcs
+(:mod:`taiji2_ground_pkg.mcs.ground_parameters`):
+the latest estimates of G and d of both GRS with their sigma and missing samples
+(``/taiji2/estimates/grs{1,2}/{scale_factors,com_offset}``) and the link's health (``/ground/link/reception``),
+at most once a second from a thread of its own; Yamcs checks their alarm ranges (sigma above the requirement,
+data missing); on stop it pushes the last values. Its account goes on ``/diagnostics`` once a second
+(packets received, sent to Yamcs, queued; Yamcs connected; parameter pushes) and, at the end of the data,
+on ``/ground/yamcs_station`` (latched JSON). Parameters: ``config/yamcs_station.yaml``.
 """
 
 from __future__ import annotations
@@ -18,6 +25,8 @@ import json
 from collections.abc import Sequence
 from typing import Any
 
+from taiji2_ground_pkg.mcs.ground_parameters import estimate_values, reception_values
+from taiji2_ground_pkg.mcs.parameter_writer import ParameterWriter
 from taiji2_ground_pkg.mcs.station import StationFrontEnd
 from taiji2_runtime import link_topics as lt
 from taiji2_runtime.entry import run_node
@@ -39,13 +48,32 @@ class YamcsStation(rclpy.node.Node):
             self._station = StationFrontEnd(port)
         except OSError as exc:  # one error line naming the parameter, not a traceback
             raise ValueError(f"station_port {port}: cannot listen on 127.0.0.1 ({exc.strerror or exc})") from None
+        url = str(dp("yamcs_url", "", read_only(
+            "the instance (yamcs://HOST:PORT/INSTANCE) whose ground parameters (estimates, link health) this "
+            "node sets; empty: packets only")).value)
         self._received = 0
         self._end = False
         self.create_subscription(messages.taiji2_msgs.SpacePackets, lt.GROUND_TM, self._on_packets, lt.reliable_all())
+        self._parameters = self._parameter_writer(url) if url else None
         self._report_pub = self.create_publisher(messages.std_msgs.String, REPORT_TOPIC, lt.latched())
         self._diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
         self.create_timer(1.0, self._publish_diagnostics,
                           clock=rclpy.clock.Clock(clock_type=rclpy.clock.ClockType.STEADY_TIME))
+
+    def _parameter_writer(self, url: str) -> ParameterWriter:
+        from taiji2_ground_pkg.mcs.yamcs_api import parse_yamcs_url, set_parameters
+
+        parse_yamcs_url(url)  # a bad address: one error line at start (GroundError)
+        writer = ParameterWriter(lambda values: set_parameters(url, values))
+        reliable = rclpy.qos.QoSProfile(depth=10, reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
+        t = messages.taiji2_msgs
+        for g in (1, 2):
+            for kind, cls in (("scale_factors", t.ScaleFactorEstimate), ("com_offset", t.ComOffsetEstimate)):
+                self.create_subscription(cls, f"/taiji2/estimates/grs{g}/{kind}",
+                                         lambda m: writer.update(estimate_values(m)), reliable)
+        self.create_subscription(messages.std_msgs.String, "/ground/link/reception",
+                                 lambda m: writer.update(reception_values(json.loads(m.data))), lt.reliable_all())
+        return writer
 
     def _on_packets(self, msg: Any) -> None:
         packets = lt.split(msg)
@@ -57,8 +85,12 @@ class YamcsStation(rclpy.node.Node):
 
     def report(self) -> dict[str, Any]:
         """Packets received from the link, written to Yamcs, still queued; Yamcs's connections so far."""
-        return {"received": self._received, "sent": self._station.sent_packets, "queued": self._station.queued(),
-                "connections": self._station.connections, "end_of_data": self._end}
+        report = {"received": self._received, "sent": self._station.sent_packets, "queued": self._station.queued(),
+                  "connections": self._station.connections, "end_of_data": self._end}
+        if self._parameters is not None:
+            report.update(parameter_pushes=self._parameters.pushes, parameter_failures=self._parameters.failures,
+                          parameter_error=self._parameters.last_error)
+        return report
 
     def _publish_report(self) -> None:
         self._report_pub.publish(messages.std_msgs.String(data=json.dumps(self.report())))
@@ -76,6 +108,8 @@ class YamcsStation(rclpy.node.Node):
             self._publish_report()  # the counts move on while the queue drains
 
     def destroy_node(self) -> None:
+        if self._parameters is not None:
+            self._parameters.close()
         self._station.close()
         super().destroy_node()
 
