@@ -71,6 +71,15 @@ def test_a_link_run_feeds_yamcs_and_its_archive_calibrates_as_the_ground_recordi
     for g in ("grs1", "grs2"):
         for key in ("scale_factors", "scale_factors_cov", "com_offset", "com_offset_cov"):
             assert from_archive[g][key] == from_bag[g][key], (g, key)
+    # and diagnose reads the archive as the recording: the same samples on its grid, the same answer (600 s is
+    # below its minimum: the check is that both paths reach the same data, cheaply)
+    diagnoses = []
+    for source, name in ((yamcs.url, "d_archive"), (bag, "d_bag")):
+        proc = run_taiji2("diagnose", str(source), "--json", "--out", str(tmp_path / name), timeout=300)
+        assert proc.returncode in (0, 3), proc.stderr[-3000:]
+        diagnoses.append(json.loads(proc.stdout))
+    assert diagnoses[0]["inputs"] == diagnoses[1]["inputs"] and diagnoses[0]["inputs"]["samples"] == 6000
+    assert diagnoses[0]["status"] == diagnoses[1]["status"]
     # the live estimates are Yamcs parameters: the final ones, to the bit, each sigma checked against its
     # requirement by Yamcs's alarm (WARNING above it)
     results = json.loads((out / "results.json").read_text())
