@@ -9,13 +9,12 @@ one line where the Java runtime or the Yamcs jars are not installed (they are in
 from __future__ import annotations
 
 import subprocess
-import time
 
 import numpy as np
 import pytest
 
 from taiji2_ground_pkg.mcs.errors import GroundError
-from taiji2_ground_pkg.mcs.yamcs_api import link_counts, parse_yamcs_url
+from taiji2_ground_pkg.mcs.yamcs_api import parse_yamcs_url, wait_for_link_count
 from taiji2_ground_pkg.raw_data import load_raw_data
 from taiji2_runtime.packets.bulk_encode import encode_streams
 from taiji2_runtime.packets.walk import walk_packets
@@ -43,20 +42,6 @@ def _packets() -> bytes:
                            "executed_torque": (s[::10], np.column_stack([d["torque"], np.zeros_like(d["torque"])]))})
 
 
-def _wait_until_archived(url: str, n: int) -> int:
-    """Wait while the link's count moves (bounded by progress, not by a wall time a busy machine exceeds)."""
-    last, still_since = -1, time.monotonic()
-    while True:
-        count, _ = link_counts(url)
-        if count >= n:
-            return count
-        if count != last:
-            last, still_since = count, time.monotonic()
-        elif time.monotonic() - still_since > 60.0:
-            return count
-        time.sleep(0.2)
-
-
 def test_station_feeds_yamcs_and_the_archive_calibrates_as_the_packet_file(yamcs, tmp_path):
     from taiji2_ground_pkg.mcs.station import StationFrontEnd
 
@@ -67,7 +52,7 @@ def test_station_feeds_yamcs_and_the_archive_calibrates_as_the_packet_file(yamcs
     try:
         station.send(packets[: len(packets) // 2])  # queued until Yamcs's link connects (its 10-s retry)
         station.send(packets[len(packets) // 2:])
-        assert _wait_until_archived(yamcs.url, len(packets)) == len(packets)
+        assert wait_for_link_count(yamcs.url, len(packets)) == len(packets)
         assert station.queued() == 0 and station.sent_packets == len(packets) and station.connections == 1
     finally:
         station.close()
@@ -76,10 +61,8 @@ def test_station_feeds_yamcs_and_the_archive_calibrates_as_the_packet_file(yamcs
     from_archive = load_raw_data(yamcs.url)
     # every packet archived, and the same samples, to the bit
     assert from_archive.packets.per_apid == from_file.packets.per_apid
-    for topic in ("star_tracker", "grs1", "grs2"):
-        a, b = (getattr(from_archive, "star_tracker" if topic == "star_tracker" else topic),
-                getattr(from_file, "star_tracker" if topic == "star_tracker" else topic))
-        assert np.array_equal(a.stamp_ns, b.stamp_ns), topic
+    for stream in ("star_tracker", "grs1", "grs2"):
+        assert np.array_equal(getattr(from_archive, stream).stamp_ns, getattr(from_file, stream).stamp_ns), stream
     assert np.array_equal(from_archive.grs1.voltages_v, from_file.grs1.voltages_v)
     assert np.array_equal(from_archive.star_tracker.quat_xyzw, from_file.star_tracker.quat_xyzw)
     # a time range of generation times: the first 100 s after the mission epoch + 1 s

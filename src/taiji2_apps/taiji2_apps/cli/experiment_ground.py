@@ -9,15 +9,9 @@ once the station has handed Yamcs everything; the results say what it sent and w
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 __all__ = ["format_ground", "ground_problem", "ground_summary", "link_count"]
-
-#: wall time [s] without the link's count moving before the station's last packets are given up on
-#: (Yamcs reads ~10^5 packets a second; the count moves unless Yamcs is stuck)
-_STILL_S = 60.0
-
 
 def ground_problem(url: str, station_port: int) -> str | None:
     """Why the run cannot feed ``url`` (a bad address, no running instance, a bad port); None if it can."""
@@ -46,15 +40,12 @@ def link_count(url: str) -> int:
 
 
 def ground_summary(url: str, station: dict[str, Any] | None, count_before: int) -> dict[str, Any]:
-    """What the station received and sent, and what Yamcs's link read during the run: waits while the link's
-    count still moves toward what was sent (bounded by its progress, not by a wall time)."""
+    """What the station received and sent, and what Yamcs's link read during the run (waiting while the
+    link's count still moves toward what was sent)."""
+    from taiji2_ground_pkg.mcs.yamcs_api import wait_for_link_count
+
     sent = int((station or {}).get("sent", 0))
-    read, last, still_since = link_count(url) - count_before, -1, time.monotonic()
-    while read < sent and time.monotonic() - still_since < _STILL_S:
-        time.sleep(0.2)
-        read = link_count(url) - count_before
-        if read != last:
-            last, still_since = read, time.monotonic()
+    read = wait_for_link_count(url, sent, since=count_before)
     return {"url": url, "station": station, "sent": sent, "read_by_yamcs": read}
 
 

@@ -9,15 +9,20 @@ runs with authentication, the user and password come from the environment (``YAM
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import os
+import time
+from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from taiji2_ground_pkg.mcs.errors import GroundError
 
 __all__ = ["YamcsAddress", "archived_packets", "instance_state", "is_yamcs_url",
-           "link_counts", "parse_yamcs_url", "set_parameters"]
+           "link_counts", "parse_yamcs_url", "set_parameters",
+           "wait_for_link_count"]
 
 _SCHEME = "yamcs"
 
@@ -67,12 +72,18 @@ def parse_yamcs_url(url: str) -> YamcsAddress:
     return YamcsAddress(f"{parts.hostname}:{parts.port}", instance, start, stop)
 
 
-def _client(server: str):  # noqa: ANN202 (yamcs.client.YamcsClient, imported late)
+@contextlib.contextmanager
+def _connected(server: str) -> Iterator[Any]:
+    """A ``yamcs.client.YamcsClient`` of ``server`` (credentials from the environment), closed after use."""
     from yamcs.client import Credentials, YamcsClient
 
     user, password = os.environ.get("YAMCS_USER"), os.environ.get("YAMCS_PASSWORD")
     credentials = Credentials(username=user, password=password) if user and password else None
-    return YamcsClient(server, credentials=credentials)
+    client = YamcsClient(server, credentials=credentials)
+    try:
+        yield client
+    finally:
+        client.close()
 
 
 def instance_state(http_port: int, instance: str = "taiji2", host: str = "127.0.0.1") -> str | None:
@@ -80,11 +91,8 @@ def instance_state(http_port: int, instance: str = "taiji2", host: str = "127.0.
     import requests
 
     try:
-        client = _client(f"{host}:{http_port}")
-        try:
+        with _connected(f"{host}:{http_port}") as client:
             states = {i.name: i.state for i in client.list_instances()}
-        finally:
-            client.close()
     except (requests.exceptions.RequestException, OSError):
         return None
     except Exception as exc:  # yamcs-client's own errors (a server still starting answers 503)
@@ -99,16 +107,13 @@ def archived_packets(url: str) -> list[bytes]:
     (generation time, then sequence count); GroundError naming the address when it cannot be read."""
     address = parse_yamcs_url(url)
     try:
-        client = _client(address.server)
-        try:
+        with _connected(address.server) as client:
             names = {i.name for i in client.list_instances()}
             if address.instance not in names:
                 raise GroundError(f"{url}: no instance {address.instance!r} on {address.server} "
                                   f"(it has {', '.join(sorted(names)) or 'none'})")
             archive = client.get_archive(address.instance)
             return [bytes(p.binary) for p in archive.stream_packets(start=address.start, stop=address.stop)]
-        finally:
-            client.close()
     except GroundError:
         raise
     except Exception as exc:
@@ -118,14 +123,24 @@ def archived_packets(url: str) -> list[bytes]:
 def link_counts(url: str, link: str = "ground-station") -> tuple[int, str]:
     """Packets the link has read so far and its status (e.g. ``OK``), through the API."""
     address = parse_yamcs_url(url)
-    client = _client(address.server)
-    try:
+    with _connected(address.server) as client:
         info = next((lk for lk in client.list_links(address.instance) if lk.name == link), None)
-    finally:
-        client.close()
     if info is None:
         raise GroundError(f"{url}: the instance has no link {link!r}")
     return int(info.in_count), str(info.status)
+
+
+def wait_for_link_count(url: str, target: int, *, since: int = 0, still_s: float = 60.0,
+                        poll_s: float = 0.2) -> int:
+    """The link's packet count minus ``since``, once it reaches ``target`` or has not moved for ``still_s`` of
+    wall time (Yamcs reads ~10^5 packets a second: the bound is on its progress, not on a busy machine)."""
+    read, last, still_since = link_counts(url)[0] - since, -1, time.monotonic()
+    while read < target and time.monotonic() - still_since < still_s:
+        time.sleep(poll_s)
+        read = link_counts(url)[0] - since
+        if read != last:
+            last, still_since = read, time.monotonic()
+    return read
 
 
 def set_parameters(url: str, values: dict[str, float], processor: str = "realtime") -> None:
@@ -135,11 +150,8 @@ def set_parameters(url: str, values: dict[str, float], processor: str = "realtim
 
     address = parse_yamcs_url(url)
     try:
-        client = _client(address.server)
-        try:
+        with _connected(address.server) as client:
             client.get_processor(address.instance, processor).set_parameter_values(
                 {f"/{SYSTEM_NAME}/{name}": value for name, value in values.items()})
-        finally:
-            client.close()
     except Exception as exc:
         raise GroundError(f"{url}: cannot set parameters: {type(exc).__name__}: {exc}") from exc
