@@ -18,7 +18,14 @@ from space_packet_parser.xtce.validation import validate_xtce
 from spacepackets.ecss.tc import PusTc
 
 from taiji2_ground_pkg.mcs.ground_parameters import parameter_specs
-from taiji2_ground_pkg.mcs.xtce import CRC_PARAMETER, REPORT_CONTAINERS, ROOT_CONTAINER, parameter_name, write_xtce
+from taiji2_ground_pkg.mcs.xtce import (
+    CRC_PARAMETER,
+    FAILURE_LABELS,
+    REPORT_CONTAINERS,
+    ROOT_CONTAINER,
+    parameter_name,
+    write_xtce,
+)
 from taiji2_runtime.packets.bulk_encode import encode_streams
 from taiji2_runtime.packets.cuc import cuc_decode_ns, cuc_encode, cuc_encode_ns
 from taiji2_runtime.packets.definition import APIDS, CUC_RESOLUTION_S, STREAM_BY_APID, STREAMS
@@ -130,7 +137,7 @@ def test_space_packet_parser_decodes_a_packet_file_bit_exactly(definition, tmp_p
 
 def test_verification_reports_decode(definition):
     tc = PusTc.unpack(encode_insert_activities(9, [Activity(10**9, (1.0, 2.0, 3.0))]))
-    cases = [(1, 0, 0), (7, 0, 0), (8, 1, 4), (8, 2, 50)]
+    cases = [(1, 0, 0), (2, 5, 0), (7, 0, 0), (8, 1, 4), (8, 2, 50)]
     octets = b"".join(encode_report(sub, tc, 123_456_789_012 + k, 100 + k, code, refused)
                       for k, (sub, code, refused) in enumerate(cases))
     packets = _parse(definition, octets)
@@ -139,10 +146,11 @@ def test_verification_reports_decode(definition):
         assert _crc_ok(raw, p) and p["ccsds_apid"] == REPORT_APID and p["ccsds_sequence_count"] == 100 + k
         assert (p["pus_version"], p["pus_service"], p["pus_subtype"]) == (2, 1, sub)
         assert (p["report_cuc_coarse"], p["report_cuc_fine"]) == cuc_encode(123_456_789_012 + k)
-        assert p["request_packet_id"] == 0x1940 and p["request_sequence_control"] & 0x3FFF == 9
-        assert ("failure_code" in p) == (sub == 8) and f"{REPORT_CONTAINERS[sub]}_crc" in p
-        if sub == 8:
-            assert (p["failure_code"], p["failure_refused"]) == (code, refused)
+        assert (p["request_ccsds_type"], p["request_apid"], p["request_sequence_count"]) == (1, 0x140, 9)
+        assert ("failure_code" in p) == (sub in (2, 8)) and f"{REPORT_CONTAINERS[sub]}_crc" in p
+        if sub in (2, 8):  # the code as an operator reads it (LATE, SCHEDULE_FULL, the acceptance defect)
+            assert (p["failure_code"].raw_value, p["failure_refused"]) == (code, refused)
+            assert p["failure_code"] == FAILURE_LABELS[code]
 
 
 def test_damaged_packets_are_not_accepted_silently(definition):
@@ -225,7 +233,7 @@ def _torque_arguments(execute_ns, torque, force):
     coarse, fine = cuc_encode(execute_ns)
     names = ("wrench_torque_x", "wrench_torque_y", "wrench_torque_z", "wrench_force_x", "wrench_force_y",
              "wrench_force_z")
-    return {"execute_cuc_coarse": coarse, "execute_cuc_fine": fine, **dict(zip(names, [*torque, *force], strict=True))}
+    return {"apid": 0x140, "execute_cuc_coarse": coarse, "execute_cuc_fine": fine, **dict(zip(names, [*torque, *force], strict=True))}
 
 
 def test_telecommands_from_the_xtce_equal_the_projects_octets(xtce):
@@ -245,7 +253,8 @@ def test_telecommands_from_the_xtce_equal_the_projects_octets(xtce):
         request = encode_torque_tc(5 + k, a.release_ns, np.array(a.torque_n_m), np.array(a.force_n))
         elements.append({"release_cuc_pfield": 0x2F, "release_cuc_coarse": coarse, "release_cuc_fine": fine,
                          "request": request})
-    assert _encode_command(root, "insert_activities", {"N": len(elements), "activities": elements}, 42) == ours
+    assert _encode_command(root, "insert_activities", {"apid": 0x140, "N": len(elements),
+                                                        "activities": elements}, 42) == ours
 
 
 # --- the verb ---------------------------------------------------------------------------------------------------

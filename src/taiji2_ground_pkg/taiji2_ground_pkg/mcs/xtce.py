@@ -38,25 +38,31 @@ import re
 from pathlib import Path
 
 from yamcs.pymdb import (
+    AcceptedVerifier,
     AggregateArgument,
+    AlgorithmCheck,
     ArgumentEntry,
     ArgumentValue,
     ArrayArgument,
     BinaryEncoding,
     BinaryMember,
     Command,
+    CompleteVerifier,
     Container,
+    EnumeratedParameter,
     Expression,
     FixedValueEntry,
     FloatArgument,
     FloatEncoding,
     FloatParameter,
+    InputParameter,
     IntegerArgument,
     IntegerEncoding,
     IntegerMember,
     IntegerParameter,
     ParameterEntry,
     System,
+    UnnamedJavaAlgorithm,
     all_of,
     any_of,
     eq,
@@ -66,7 +72,8 @@ from taiji2_ground_pkg.mcs.ground_parameters import add_ground_parameters
 from taiji2_runtime.packets import definition as d
 from taiji2_runtime.packets import scheduling, telecommand
 
-__all__ = ["CRC_PARAMETER", "PRIMARY_HEADER", "REPORT_CONTAINERS", "ROOT_CONTAINER", "SYSTEM_NAME",
+__all__ = ["CRC_PARAMETER", "FAILURE_LABELS", "PRIMARY_HEADER", "REPORT_CONTAINERS", "ROOT_CONTAINER", "SYSTEM_NAME",
+           "VERIFICATION_WINDOW_S", "VERIFIER_STAGES",
            "build_system", "parameter_name", "write_xtce", "xtce_document"]
 
 SYSTEM_NAME = "taiji2"
@@ -77,8 +84,17 @@ PRIMARY_HEADER = (("ccsds_version", 3), ("ccsds_type", 1), ("ccsds_secondary_hea
 #: the packet error control parameter of a concrete container (its last entry; ``{container}`` its name)
 CRC_PARAMETER = "{container}_crc"
 #: the verification reports' containers: PUS subtype -> container name
-REPORT_CONTAINERS = {1: "tm_1_1_acceptance_success", 7: "tm_1_7_completion_success",
-                     8: "tm_1_8_completion_failure"}
+REPORT_CONTAINERS = {1: "tm_1_1_acceptance_success", 2: "tm_1_2_acceptance_failure",
+                     7: "tm_1_7_completion_success", 8: "tm_1_8_completion_failure"}
+#: the command history stages of a TC[11,4], from the onboard reports (Yamcs ``Pus1Verifier``): name, the PUS
+#: stage (its success subtype; the failure is the next one)
+VERIFIER_STAGES = (("Acceptance", 1), ("Execution", 7))
+#: how long after its release Yamcs waits for a stage [s]: the planner releases a run's tables at its start and
+#: the ground station holds each until its pass, so a table's reports come up to a run's length later
+VERIFICATION_WINDOW_S = 2 * 86400.0
+#: the failure notice codes of TM[1,2] and TM[1,8] (:mod:`taiji2_runtime.packets.scheduling`) as operators read them
+FAILURE_LABELS = {scheduling.FAILURE_LATE: "LATE", scheduling.FAILURE_CAPACITY: "SCHEDULE_FULL",
+                  **{code: kind.upper() for kind, code in scheduling.ACCEPTANCE_FAILURE_CODES.items()}}
 
 _UNSEGMENTED = 0b11
 _TM, _TC = 0, 1
@@ -155,9 +171,12 @@ def _reports(system: System, root: Container, tm: list[Expression], apid: Intege
            "reference status"), ("pus_service", 8, "service type"), ("pus_subtype", 8, "message subtype"),
            ("pus_message_counter", 16, "message type counter"), ("pus_destination_id", 16, "destination id")]
     entries = {name: _uint(system, name, bits, f"PUS-C TM secondary header: {text}") for name, bits, text in pus}
-    request = [("request_packet_id", 16, "request id: packet version, type, flag and APID of the TC"),
-               ("request_sequence_control", 16, "request id: sequence flags and count of the TC")]
-    requests = [_uint(system, name, bits, text) for name, bits, text in request]
+    # the request id (the TC's packet id and sequence control) as its fields: Yamcs's verifiers match the
+    # report's APID and sequence count with the command's
+    request = [("request_ccsds_version", 3, "version"), ("request_ccsds_type", 1, "type (1: TC)"),
+               ("request_ccsds_secondary_header", 1, "secondary header flag"), ("request_apid", 11, "APID"),
+               ("request_sequence_flags", 2, "sequence flags"), ("request_sequence_count", 14, "sequence count")]
+    requests = [_uint(system, name, bits, f"request id of the TC reported on: {text}") for name, bits, text in request]
     cuc = _cuc_entries(system, "report_")
     pfield = cuc[0].parameter
     base = Container(system, "pus_verification_report",
@@ -166,11 +185,16 @@ def _reports(system: System, root: Container, tm: list[Expression], apid: Intege
                      base=root, abstract=True,
                      condition=all_of(*tm, eq(apid, scheduling.REPORT_APID)),
                      short_description=f"APID 0x{scheduling.REPORT_APID:03X}: PUS-C TM[1,x] verification report")
-    failure = [ParameterEntry(_uint(system, "failure_code", 8, f"failure notice code ({scheduling.FAILURE_LATE}: "
-                                    f"late, {scheduling.FAILURE_CAPACITY}: schedule full)")),
-               ParameterEntry(_uint(system, "failure_refused", 16, "failure notice data: activities refused"))]
+    code = EnumeratedParameter(system, "failure_code", sorted(FAILURE_LABELS.items()),
+                               encoding=IntegerEncoding(bits=8),
+                               short_description="failure notice code: TM[1,8] LATE (a release time before the "
+                                                 "table's arrival plus the time margin) or SCHEDULE_FULL; TM[1,2] "
+                                                 "the defect of a TC refused at acceptance")
+    failure = [ParameterEntry(code),
+               ParameterEntry(_uint(system, "failure_refused", 16, "failure notice data: TM[1,8] activities refused "
+                                                                   "(TM[1,2]: 0)"))]
     for subtype, name in REPORT_CONTAINERS.items():
-        Container(system, name, [*(failure if subtype == 8 else []), _crc(system, name)], base=base,
+        Container(system, name, [*(failure if subtype in (2, 8) else []), _crc(system, name)], base=base,
                   condition=all_of(eq(entries["pus_version"], _PUS_C), eq(entries["pus_service"], 1),
                                    eq(entries["pus_subtype"], subtype), eq(pfield, d.CUC_PFIELD)),
                   short_description=f"PUS TM[1,{subtype}]")
@@ -180,9 +204,11 @@ def _pus_tc(system: System, name: str, service: int, subtype: int, arguments: li
             description: str) -> Command:
     """A PUS-C TC of APID ``TC_APID``: the primary header (sequence count and length 0: the link's
     postprocessor fills them and appends the CRC), the PUS-C TC secondary header, then ``entries``."""
+    # the APID is an argument (of one allowed value, its default) so that the verifiers can read it
+    apid = IntegerArgument("apid", signed=False, minimum=d.TC_APID, maximum=d.TC_APID, default=d.TC_APID,
+                           encoding=IntegerEncoding(bits=11), short_description="APID of the onboard executor")
     fixed = [FixedValueEntry(f"{0:02x}", "ccsds_version", bits=3), FixedValueEntry(f"{_TC:02x}", "ccsds_type", bits=1),
-             FixedValueEntry("01", "ccsds_secondary_header", bits=1),
-             FixedValueEntry(f"{d.TC_APID:04x}", "ccsds_apid", bits=11),
+             FixedValueEntry("01", "ccsds_secondary_header", bits=1), ArgumentEntry(apid),
              FixedValueEntry(f"{_UNSEGMENTED:02x}", "ccsds_sequence_flags", bits=2),
              FixedValueEntry("0000", "ccsds_sequence_count", bits=14,
                              short_description="set by the link's postprocessor"),
@@ -193,7 +219,7 @@ def _pus_tc(system: System, name: str, service: int, subtype: int, arguments: li
              FixedValueEntry(f"{service:02x}", "pus_service", bits=8),
              FixedValueEntry(f"{subtype:02x}", "pus_subtype", bits=8),
              FixedValueEntry(f"{_SOURCE_ID:04x}", "pus_source_id", bits=16)]
-    return Command(system, name, arguments=arguments, entries=[*fixed, *entries],
+    return Command(system, name, arguments=[apid, *arguments], entries=[*fixed, *entries],
                    short_description=f"PUS-C TC[{service},{subtype}] APID 0x{d.TC_APID:03X}: {description}",
                    long_description="The CRC-16-CCITT is appended, and the sequence count and length set, by "
                                     "the TC link's postprocessor (Yamcs: org.yamcs.pus.PusCommandPostprocessor "
@@ -234,9 +260,35 @@ def _telecommands(system: System) -> None:
                                        "its execution time = the release time")])
     activities = ArrayArgument("activities", activity, length=ArgumentValue(count),
                                short_description="the N instructions")
-    _pus_tc(system, "insert_activities", scheduling.SCHEDULING_SERVICE, scheduling.INSERT_ACTIVITIES,
-            [count, activities], [ArgumentEntry(count), ArgumentEntry(activities)],
-            "insert activities into the time-based schedule")
+    table = _pus_tc(system, "insert_activities", scheduling.SCHEDULING_SERVICE, scheduling.INSERT_ACTIVITIES,
+                    [count, activities], [ArgumentEntry(count), ArgumentEntry(activities)],
+                    "insert activities into the time-based schedule")
+    _add_verifiers(table)
+
+
+def _add_verifiers(command: Command) -> None:
+    """The command history's Acceptance and Execution stages of ``command`` from the onboard TM[1,1|2] and
+    TM[1,7|8]: Yamcs's ``org.yamcs.pus.Pus1Verifier`` matches a report to the command by the APID (the
+    command's argument) and the sequence count (Yamcs's postprocessor puts it in the command history,
+    ``ccsds-seqcount``) and passes or fails the stage; a failure's message names the onboard reason."""
+    def check(stage: int) -> AlgorithmCheck:
+        # Pus1Verifier takes its first five inputs by position: sent APID, sent count, report APID, report
+        # count, report subtype
+        inputs = [InputParameter("/yamcs/cmd/arg/apid", name="sentApid"),
+                  InputParameter("/yamcs/cmdHist/ccsds-seqcount", name="sentSeq"),
+                  InputParameter(f"/{SYSTEM_NAME}/request_apid", name="rcvdApid"),
+                  InputParameter(f"/{SYSTEM_NAME}/request_sequence_count", name="rcvdSeq"),
+                  InputParameter(f"/{SYSTEM_NAME}/pus_subtype", name="subtype"),
+                  InputParameter(f"/{SYSTEM_NAME}/failure_code", name="failure_code"),
+                  InputParameter(f"/{SYSTEM_NAME}/failure_refused", name="failure_refused")]
+        template = ("refused at acceptance onboard: {failure_code}" if stage == 1 else
+                    "refused onboard: {failure_code}, {failure_refused} activities not scheduled")
+        return AlgorithmCheck(UnnamedJavaAlgorithm(
+            f'org.yamcs.pus.Pus1Verifier({{stage: {stage}, template: "{template}"}})', inputs=inputs))
+
+    (acceptance, _), (execution, _) = VERIFIER_STAGES
+    command.accepted_verifier = AcceptedVerifier(check(1), VERIFICATION_WINDOW_S, name=acceptance)
+    command.complete_verifiers.append(CompleteVerifier(check(7), VERIFICATION_WINDOW_S, name=execution))
 
 
 def build_system() -> System:
@@ -251,8 +303,20 @@ def build_system() -> System:
 
 def xtce_document() -> str:
     """The XTCE 1.2 document (XML text)."""
-    return build_system().dumps(top_comment="Generated by taiji2_ground_pkg.mcs.xtce (yamcs-pymdb) from "
+    text = build_system().dumps(top_comment="Generated by taiji2_ground_pkg.mcs.xtce (yamcs-pymdb) from "
                                             "taiji2_runtime.packets.definition: do not edit")
+    return _name_verifier_algorithms(text)
+
+
+def _name_verifier_algorithms(text: str) -> str:
+    """pymdb 1.4 names every verifier's algorithm "Unnamed", and Yamcs refuses a command whose two verifiers
+    run algorithms of one name ("already active"): each becomes ``<command>_<verifier>``."""
+    def command(match: re.Match) -> str:
+        name = match.group(1)
+        return re.sub(r'(<(\w+Verifier) name="(\w+)">(?:(?!</\2>).)*?<CustomAlgorithm name=")Unnamed"',
+                      lambda m: f'{m.group(1)}{name}_{m.group(3)}"', match.group(0), flags=re.DOTALL)
+
+    return re.sub(r'<MetaCommand name="(\w+)".*?</MetaCommand>', command, text, flags=re.DOTALL)
 
 
 def write_xtce(path: str | Path) -> Path:

@@ -11,7 +11,8 @@ The instance, as an operator's ground station has it:
 * one data link, ``ground-station`` (Yamcs's ``TcpTcTmDataLink``): Yamcs connects to the ground station
   front end (:mod:`.station`) at ``127.0.0.1:STATION_PORT`` and reads the CCSDS Space Packets the ground
   received, in reception order, on one TCP connection (a busy machine does not drop what TCP carries);
-  telecommands go back on the same connection. Yamcs retries the connection every 10 s;
+  telecommands go back on the same connection, completed by Yamcs's ``PusCommandPostprocessor`` (length,
+  sequence count, CRC-16-CCITT). Yamcs retries the connection every 10 s;
 * the packets' preprocessing: ``GenericPacketPreprocessor`` with the CUC time at offset 6 (its P-field in
   the packet, read by Yamcs), the mission epoch ``MISSION_EPOCH_UTC`` for the onboard clock's zero, the
   APID and sequence count as the archive's sequence number, and the CRC-16-CCITT of the last two octets
@@ -88,6 +89,10 @@ def instance_config(station_port: int) -> dict:
                 "timeEncoding": {"type": "CUC", "epoch": "CUSTOM", "epochUTC": MISSION_EPOCH_UTC,
                                  "timeIncludesLeapSeconds": False},
             },
+            # the telecommands' length, sequence count (per APID, into the command history as ccsds-seqcount,
+            # which the verifiers match with the onboard reports) and CRC
+            "commandPostprocessorClassName": "org.yamcs.pus.PusCommandPostprocessor",
+            "commandPostprocessorArgs": {"errorDetection": {"type": "CRC-16-CCIIT"}},
         }],
         "mdb": [{"type": "xtce", "args": {"file": "mdb/taiji2.xml"}}],
         "streamConfig": {
