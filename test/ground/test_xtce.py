@@ -17,6 +17,7 @@ from space_packet_parser.xtce.definitions import XtcePacketDefinition
 from space_packet_parser.xtce.validation import validate_xtce
 from spacepackets.ecss.tc import PusTc
 
+from taiji2_ground_pkg.mcs.commanding import insert_activities_arguments
 from taiji2_ground_pkg.mcs.ground_parameters import parameter_specs
 from taiji2_ground_pkg.mcs.xtce import (
     CRC_PARAMETER,
@@ -233,7 +234,8 @@ def _torque_arguments(execute_ns, torque, force):
     coarse, fine = cuc_encode(execute_ns)
     names = ("wrench_torque_x", "wrench_torque_y", "wrench_torque_z", "wrench_force_x", "wrench_force_y",
              "wrench_force_z")
-    return {"apid": 0x140, "execute_cuc_coarse": coarse, "execute_cuc_fine": fine, **dict(zip(names, [*torque, *force], strict=True))}
+    return {"apid": 0x140, "execute_cuc_coarse": coarse, "execute_cuc_fine": fine,
+            **dict(zip(names, [*torque, *force], strict=True))}
 
 
 def test_telecommands_from_the_xtce_equal_the_projects_octets(xtce):
@@ -255,6 +257,8 @@ def test_telecommands_from_the_xtce_equal_the_projects_octets(xtce):
                          "request": request})
     assert _encode_command(root, "insert_activities", {"apid": 0x140, "N": len(elements),
                                                         "activities": elements}, 42) == ours
+    # the planner's tables become Yamcs commands through these arguments: sliced from our octets, they encode back
+    assert _encode_command(root, "insert_activities", insert_activities_arguments(ours), 42) == ours
 
 
 # --- the verb ---------------------------------------------------------------------------------------------------

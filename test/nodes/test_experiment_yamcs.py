@@ -1,6 +1,7 @@
-"""A link experiment feeding the ground station's Yamcs (issue 40 items 2-3): every packet the ground receives
+"""A link experiment feeding the ground station's Yamcs (issue 40 items 2-5): every packet the ground receives
 reaches Yamcs's archive through its TCP data link, the calibration from the archive equals the calibration
-of the ground's recording of the same run, and the live estimates are Yamcs parameters with their alarms.
+of the ground's recording of the same run, the live estimates are Yamcs parameters with their alarms, and
+the tables are commanded through Yamcs with their verification in its command history.
 
 The short link of test_link_faults.py (fast passes, 600 s of data); one real Yamcs, started for the module.
 """
@@ -66,6 +67,17 @@ def test_a_link_run_feeds_yamcs_and_its_archive_calibrates_as_the_ground_recordi
     assert ground["station"]["received"] > 0 and ground["station"]["queued"] == 0, ground
     assert ground["sent"] == ground["station"]["received"] == ground["read_by_yamcs"], ground
     assert f"sent {ground['sent']} to Yamcs; its link read {ground['read_by_yamcs']}" in proc.stdout
+    # commanded through Yamcs: every table issued there, sent on its link, signed by the station, accepted and
+    # executed onboard, each stage in Yamcs's command history (from the onboard TM[1,1] and TM[1,7])
+    results = json.loads((out / "results.json").read_text())
+    tables = results["link"]["commanding"]["tables"]
+    commands = ground["commands"]
+    assert tables > 0 and commands["issued"] == tables and not commands["failed"], commands
+    for stage in ("Queued", "Released", "Sent", "Acceptance", "Execution"):
+        assert commands[stage] == tables, (stage, commands)
+    assert ground["station"]["uplinked"] == ground["station"]["planned"] == tables, ground["station"]
+    assert results["link"]["commanding"]["acknowledged"] == tables  # the onboard reports name Yamcs's counts
+    assert [h["seq_count"] for h in commands["history"]] == sorted({h["seq_count"] for h in commands["history"]})
     # the archive calibrates as the ground's recording: the same estimates, to the last digit
     from_archive, from_bag = _calibration(yamcs.url), _calibration(bag)
     for g in ("grs1", "grs2"):
@@ -82,7 +94,6 @@ def test_a_link_run_feeds_yamcs_and_its_archive_calibrates_as_the_ground_recordi
     assert diagnoses[0]["status"] == diagnoses[1]["status"]
     # the live estimates are Yamcs parameters: the final ones, to the bit, each sigma checked against its
     # requirement by Yamcs's alarm (WARNING above it)
-    results = json.loads((out / "results.json").read_text())
     assert ground["station"]["parameter_pushes"] > 0 and ground["station"]["parameter_failures"] == 0, ground
     values = _parameters(yamcs.url)
     for g in (1, 2):

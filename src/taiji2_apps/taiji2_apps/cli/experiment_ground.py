@@ -2,9 +2,10 @@
 
 The node :mod:`taiji2_ground_pkg.nodes.yamcs_station` forwards every packet the ground station receives to
 the Yamcs instance at ``URL`` (started with ``taiji2 ground serve``), whose ``ground-station`` link
-connects to it on ``--station-port``; Yamcs archives and decodes them (docs/operations.md). The run ends
-once the station has handed Yamcs everything; the results say what it sent and what Yamcs's link read
-(``link.yamcs``).
+connects to it on ``--station-port``; Yamcs archives and decodes them (docs/operations.md). The planner
+issues the time-tagged tables as Yamcs commands and the station signs and uplinks what Yamcs sends. The run
+ends once the station has handed Yamcs everything; the results say what it sent, what Yamcs's link read and
+each table's command history (``link.yamcs``).
 """
 
 from __future__ import annotations
@@ -12,6 +13,9 @@ from __future__ import annotations
 from typing import Any
 
 __all__ = ["format_ground", "ground_problem", "ground_summary", "link_count"]
+
+_STAGES = ("Queued", "Released", "Sent", "Acceptance", "Execution")
+
 
 def ground_problem(url: str, station_port: int) -> str | None:
     """Why the run cannot feed ``url`` (a bad address, no running instance, a bad port); None if it can."""
@@ -39,17 +43,32 @@ def link_count(url: str) -> int:
     return link_counts(url)[0]
 
 
-def ground_summary(url: str, station: dict[str, Any] | None, count_before: int) -> dict[str, Any]:
+def ground_summary(url: str, station: dict[str, Any] | None, count_before: int, started: Any = None,
+                   tables: int = 0) -> dict[str, Any]:
     """What the station received and sent, and what Yamcs's link read during the run (waiting while the
-    link's count still moves toward what was sent)."""
-    from taiji2_ground_pkg.mcs.yamcs_api import wait_for_link_count
+    link's count still moves toward what was sent); with ``started`` (the run's UTC start), the command
+    history of the ``tables`` issued since (waiting while their verification still moves)."""
+    from taiji2_ground_pkg.mcs.yamcs_api import wait_for_link_count, wait_for_verification
 
     sent = int((station or {}).get("sent", 0))
     read = wait_for_link_count(url, sent, since=count_before)
-    return {"url": url, "station": station, "sent": sent, "read_by_yamcs": read}
+    out: dict[str, Any] = {"url": url, "station": station, "sent": sent, "read_by_yamcs": read}
+    if started is not None:
+        history = wait_for_verification(url, started, tables)
+        out["commands"] = {"issued": len(history), **{s: sum(h[s] == "OK" for h in history) for s in _STAGES},
+                           "failed": [{"seq_count": h["seq_count"], "message": h["message"]} for h in history
+                                      if any(h[s] in ("NOK", "TIMEOUT") for s in _STAGES)],
+                           "history": history}
+    return out
 
 
 def format_ground(ground: dict[str, Any]) -> str:
     station = ground.get("station") or {}
-    return (f"Yamcs ({ground['url']}): the ground received {station.get('received', 0)} packets, sent "
+    line = (f"Yamcs ({ground['url']}): the ground received {station.get('received', 0)} packets, sent "
             f"{ground['sent']} to Yamcs; its link read {ground['read_by_yamcs']}")
+    commands = ground.get("commands")
+    if commands:
+        line += (f"\n  commanded through Yamcs: {commands['issued']} table(s) issued; "
+                 + ", ".join(f"{s} {commands[s]}" for s in _STAGES)
+                 + "".join(f"\n  table (count {f['seq_count']}) failed: {f['message']}" for f in commands["failed"]))
+    return line

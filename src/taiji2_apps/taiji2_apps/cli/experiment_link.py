@@ -13,6 +13,7 @@ library and the runner (standard library only) at module level (a verb's rule).
 from __future__ import annotations
 
 import argparse
+import datetime as dt
 import json
 import sys
 import time
@@ -362,7 +363,8 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
     if problem:
         print(f"error: taiji2 experiment: {problem}", file=sys.stderr)
         return ExitStatus.BAD_INPUT
-    yamcs_count_before = link_count(args.ground) if args.ground else 0
+    # the link's count and the time before the run: what Yamcs read, and the commands issued, during it
+    yamcs_before = (link_count(args.ground), dt.datetime.now(dt.timezone.utc)) if args.ground else (0, None)
 
     try:
         attacks = attack_kinds(args.uplink_attack) if args.uplink_attack else []
@@ -413,7 +415,8 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         "command_planner": ["run", "taiji2_ground_pkg", "command_planner", "--ros-args", "-r", "__ns:=/ground",
                             "-p", f"preset:={args.layout}", "-p", f"link_model:={args.link}",
                             "-p", f"start_s:={start_s}", "-p", f"duration_s:={duration_s - start_s}",
-                            "-p", f"key_file:={key_file}",
+                            # on Yamcs the planner issues commands and the station signs them
+                            "-p", f"yamcs_url:={args.ground}" if args.ground else f"key_file:={key_file}",
                             *[a for p in commander_maneuver for a in ("-p", p)]],
     }
     # the simulator exits (0) at the end of its data; every other node runs until stopped (what ends the run is
@@ -424,7 +427,8 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
                                        "-p", f"seed:={args.seed}"]
     if args.ground:
         commands["yamcs_station"] = ["run", "taiji2_ground_pkg", "yamcs_station", "--ros-args", "-r", "__ns:=/ground",
-                                     "-p", f"station_port:={args.station_port}", "-p", f"yamcs_url:={args.ground}"]
+                                     "-p", f"station_port:={args.station_port}", "-p", f"yamcs_url:={args.ground}",
+                                     "-p", f"key_file:={key_file}"]
     nodes = [NodeProcess.taiji2(name, argv) for name, argv in commands.items()]
     nodes.append(NodeProcess.taiji2("spacecraft_sim", [
         "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard", *onboard_remaps, *source,
@@ -490,15 +494,15 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         remove_leaked()
 
     return run_to_status(graph, lambda result: _report(args, plan, model, link_seed, monitor, out, duration_s,
-                                                       result.wall_s, temporary, yamcs_count_before), cleanup)
+                                                       result.wall_s, temporary, yamcs_before), cleanup)
 
 
 def _report(args: argparse.Namespace, plan: Any, model: Any, link_seed: int, monitor: LinkMonitor, out: Path,
-            duration_s: float, elapsed: float, temporary: bool, yamcs_count_before: int = 0) -> int:
+            duration_s: float, elapsed: float, temporary: bool, yamcs_before: tuple[int, Any] = (0, None)) -> int:
     """Print the final estimates, the link report and the verdict, write results.json; returns 0 (every
     requirement met) or 3. The estimate table, the requirement section and the verdict are one evaluation
-    (:func:`~taiji2_apps.experiment_setup.experiment_verdict`), as in the direct run. ``yamcs_count_before``:
-    the Yamcs link's packet count before the run (with ``--ground``)."""
+    (:func:`~taiji2_apps.experiment_setup.experiment_verdict`), as in the direct run. ``yamcs_before``:
+    the Yamcs link's packet count and the UTC time before the run (with ``--ground``)."""
     from taiji2_apps.experiment_setup import experiment_verdict
     from taiji2_estimator_pkg.report import EstimateTable, format_table
 
@@ -536,7 +540,7 @@ def _report(args: argparse.Namespace, plan: Any, model: Any, link_seed: int, mon
     if args.ground:
         from taiji2_apps.cli.experiment_ground import ground_summary
 
-        link["yamcs"] = ground_summary(args.ground, monitor.station, yamcs_count_before)
+        link["yamcs"] = ground_summary(args.ground, monitor.station, *yamcs_before, len(monitor.plan or []))
     if link["commanding"]["lost_on_uplink"]:
         faults["command table lost on uplink"] = ("TC[11,4] #" + ", #".join(
             map(str, link["commanding"]["lost_on_uplink"])) + " never acknowledged")

@@ -20,9 +20,9 @@ from urllib.parse import parse_qs, urlsplit
 
 from taiji2_ground_pkg.mcs.errors import GroundError
 
-__all__ = ["YamcsAddress", "archived_packets", "instance_state", "is_yamcs_url",
+__all__ = ["YamcsAddress", "archived_packets", "command_history", "connect", "instance_state", "is_yamcs_url",
            "link_counts", "parse_yamcs_url", "set_parameters",
-           "wait_for_link_count"]
+           "wait_for_link_count", "wait_for_verification"]
 
 _SCHEME = "yamcs"
 
@@ -72,14 +72,19 @@ def parse_yamcs_url(url: str) -> YamcsAddress:
     return YamcsAddress(f"{parts.hostname}:{parts.port}", instance, start, stop)
 
 
-@contextlib.contextmanager
-def _connected(server: str) -> Iterator[Any]:
-    """A ``yamcs.client.YamcsClient`` of ``server`` (credentials from the environment), closed after use."""
+def connect(server: str) -> Any:
+    """A ``yamcs.client.YamcsClient`` of ``server`` (``HOST:PORT``; credentials from the environment)."""
     from yamcs.client import Credentials, YamcsClient
 
     user, password = os.environ.get("YAMCS_USER"), os.environ.get("YAMCS_PASSWORD")
     credentials = Credentials(username=user, password=password) if user and password else None
-    client = YamcsClient(server, credentials=credentials)
+    return YamcsClient(server, credentials=credentials)
+
+
+@contextlib.contextmanager
+def _connected(server: str) -> Iterator[Any]:
+    """A client of ``server`` (:func:`connect`), closed after use."""
+    client = connect(server)
     try:
         yield client
     finally:
@@ -155,3 +160,41 @@ def set_parameters(url: str, values: dict[str, float], processor: str = "realtim
                 {f"/{SYSTEM_NAME}/{name}": value for name, value in values.items()})
     except Exception as exc:
         raise GroundError(f"{url}: cannot set parameters: {type(exc).__name__}: {exc}") from exc
+
+
+def command_history(url: str, since: dt.datetime, command: str = "insert_activities") -> list[dict[str, Any]]:
+    """The archived history of the ``command`` commands issued at or after ``since`` (UTC), oldest first: the
+    CCSDS ``seq_count`` Yamcs gave each, every stage's status (``Queued`` ... ``Acceptance``, ``Execution``:
+    OK, NOK, PENDING, TIMEOUT, or None), the failure ``message`` and the operator's ``comment``."""
+    from taiji2_ground_pkg.mcs.xtce import SYSTEM_NAME, VERIFIER_STAGES
+
+    address = parse_yamcs_url(url)
+    stages = {**{f"Acknowledge_{s}": s for s in ("Queued", "Released", "Sent")},
+              **{f"Verifier_{s}": s for s, _ in VERIFIER_STAGES}}
+    out = []
+    with _connected(address.server) as client:
+        archive = client.get_archive(address.instance)
+        for entry in archive.list_command_history(start=since, descending=False):
+            if entry.name != f"/{SYSTEM_NAME}/{command}":
+                continue  # (filtering by name in the request answers 404 on Yamcs 5.12)
+            binary = entry.binary or b""
+            acks = dict(entry.acknowledgments)
+            out.append({"id": entry.id, "comment": entry.comment, "message": entry.error,
+                        "seq_count": int.from_bytes(binary[2:4], "big") & 0x3FFF if len(binary) >= 4 else None,
+                        **{stage: getattr(acks.get(key), "status", None) for key, stage in stages.items()}})
+    return out
+
+
+def wait_for_verification(url: str, since: dt.datetime, expected: int, *, still_s: float = 60.0,
+                          poll_s: float = 0.5) -> list[dict[str, Any]]:
+    """:func:`command_history` once ``expected`` commands are there with no stage PENDING, or once it has not
+    changed for ``still_s`` of wall time (Yamcs verifies as the reports come: the bound is on its progress)."""
+    history, still_since = command_history(url, since), time.monotonic()
+    while time.monotonic() - still_since < still_s:
+        if len(history) >= expected and not any(v == "PENDING" for h in history for v in h.values()):
+            break
+        time.sleep(poll_s)
+        now = command_history(url, since)
+        if now != history:
+            history, still_since = now, time.monotonic()
+    return history

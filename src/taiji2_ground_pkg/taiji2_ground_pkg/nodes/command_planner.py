@@ -13,23 +13,34 @@ onboard verification reports the ground receives (``/ground/link/reception``): a
 acceptance report once a later table's report or the end of the data has come is named "command table
 lost on uplink" on ``/diagnostics``, a TM[1,2] "refused at acceptance". Without a usable key file it plans
 but sends nothing (the spacecraft would refuse unsigned frames) and says so on ``/diagnostics``.
+
+With ``yamcs_url`` the ground runs on Yamcs: the planner issues the tables, in plan order, as
+``insert_activities`` commands of that instance (once its ``ground-station`` link is connected) instead of
+sending frames; Yamcs gives each its sequence count and CRC and hands it to the ground station
+(:mod:`taiji2_ground_pkg.nodes.yamcs_station`), which signs and uplinks it at its pass; the command
+history shows Queued, Released, Sent, then Acceptance and Execution from the onboard reports. The plan is
+published again with Yamcs's sequence counts as ``tc_seq`` (what the onboard reports name) once every
+table has one; each entry's ``digest`` joins the table as planned and as Yamcs sent it
+(:func:`taiji2_ground_pkg.mcs.commanding.table_digest`). No key file is needed here then.
 Parameters: ``config/command_planner.yaml``.
 """
 
 from __future__ import annotations
 
 import json
+import threading
 from collections.abc import Sequence
 from typing import Any
 
+from taiji2_ground_pkg.mcs.commanding import table_digest
 from taiji2_ground_pkg.uplink_plan import maneuver_activities, plan_uplinks
+from taiji2_ground_pkg.uplink_signer import frame_signer
 from taiji2_model.maneuver_choice import MANEUVER_HELP, choose_maneuver
 from taiji2_runtime import link_topics as lt
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.node_parameters import read_only
 from taiji2_runtime.packets.scheduling import MAX_ACTIVITIES_PER_TC, Activity, encode_insert_activities
 from taiji2_runtime.packets.sdls import FrameSigner
-from taiji2_runtime.packets.sdls_keys import KeyFileError, key_file_warning, load_key_file
 from taiji2_runtime.ros import messages, rclpy
 from taiji2_sim_pkg.core.link import load_link_model
 
@@ -56,6 +67,9 @@ class CommandPlanner(rclpy.node.Node):
         spi = dp("spi", -1, read_only("SPI to sign with (-1: the key file's highest active SPI)")).value
         first_sequence = dp("first_sequence", 1, read_only(
             "the first frame's SDLS sequence number (IV counter); above the last the spacecraft accepted")).value
+        yamcs_url = str(dp("yamcs_url", "", read_only(
+            "issue the tables as commands of this Yamcs instance (yamcs://HOST:PORT/INSTANCE), whose ground "
+            "station signs and uplinks them; empty: sign and send them here")).value)
         maneuver = choose_maneuver(preset, asked or None, None).maneuver  # ValueError: one line naming the choice
         if start_s >= 0:
             maneuver.start_s = float(start_s)
@@ -76,14 +90,15 @@ class CommandPlanner(rclpy.node.Node):
                 self._ready_ns.append(round(table.ready_s * _NS))
                 self.plan.append({"tc_seq": seq, "pass": table.contact, "ready_s": table.ready_s,
                                   "activities": len(part), "first_release_s": part[0][0],
-                                  "last_release_s": part[-1][0]})
+                                  "last_release_s": part[-1][0], "digest": table_digest(self._packets[-1])})
                 seq += 1
                 request += len(part)
         self._accepted: set[int] = set()
         self._refused: dict[int, int] = {}
         self._rejected: dict[int, int] = {}
         self._lost: list[int] = []
-        self.signer, self._key_problem = self._signer(key_file, spi, first_sequence)
+        self._yamcs = _YamcsCommanding(yamcs_url, self._packets, self.plan) if yamcs_url else None
+        self.signer, self._key_problem = (None, "") if self._yamcs else self._signer(key_file, spi, first_sequence)
         self._frames = [self.signer.sign(p) for p in self._packets] if self.signer else []
         qos = lt.reliable_all()
         self._tc_pub = self.create_publisher(messages.taiji2_msgs.SpacePackets, lt.GROUND_TC, qos)
@@ -99,20 +114,21 @@ class CommandPlanner(rclpy.node.Node):
 
     def _signer(self, key_file: str, spi: int, first_sequence: int) -> tuple[FrameSigner | None, str]:
         """The frame signer, or None and why not (logged)."""
-        try:
-            if not key_file:
-                raise KeyFileError("no key_file")
-            signer = FrameSigner(load_key_file(key_file), None if spi < 0 else spi, first_sequence)
-        except (KeyFileError, ValueError) as exc:
-            problem = f"telecommands not sent: {exc}"
+        signer, problem, warning = frame_signer(key_file, spi, first_sequence)
+        if problem:
             self.get_logger().error(f"{problem} (the spacecraft refuses frames without a valid MAC)")
-            return None, problem
-        warning = key_file_warning(key_file)
-        if warning:
+        elif warning:
             self.get_logger().warn(warning)
-        return signer, ""
+        return signer, problem
 
     def _send(self) -> None:
+        if self._yamcs is not None:
+            plan = self._yamcs.plan_with_yamcs_counts()
+            if plan is not None:  # every table has Yamcs's count: the plan names them as the reports will
+                self.plan = plan
+                self._plan_pub.publish(messages.std_msgs.String(data=json.dumps(plan)))
+                self._send_timer.cancel()
+            return
         if self._tc_pub.get_subscription_count() == 0 or self.signer is None:
             return  # the link is not there yet, or nothing can be signed
         self._tc_pub.publish(lt.burst(self._frames, self._ready_ns, lt.END_NS, end_of_data=True))
@@ -135,6 +151,11 @@ class CommandPlanner(rclpy.node.Node):
     def _publish_diagnostics(self) -> None:
         d = messages.diagnostic_msgs
         problems = [self._key_problem] if self._key_problem else []
+        yamcs = self._yamcs.summary() if self._yamcs else {}
+        if yamcs.get("problem"):
+            problems.append(yamcs["problem"])
+        if yamcs.get("failed"):
+            problems.append("failed in Yamcs: " + "; ".join(f"#{k}: {m}" for k, m in yamcs["failed"].items()))
         if self._rejected:
             problems.append(f"telecommands refused at acceptance (TM[1,2]): #{', #'.join(map(str, self._rejected))}")
         if self._lost:
@@ -144,13 +165,71 @@ class CommandPlanner(rclpy.node.Node):
             problems.append(f"activities refused onboard: {sum(self._refused.values())} (late or over capacity)")
         status = d.DiagnosticStatus(name="command_planner", hardware_id="taiji2_ground",
                                     message="; ".join(problems) or "nominal")
-        status.level = (d.DiagnosticStatus.ERROR if self._key_problem else d.DiagnosticStatus.WARN if problems
+        error = self._key_problem or yamcs.get("problem")
+        status.level = (d.DiagnosticStatus.ERROR if error else d.DiagnosticStatus.WARN if problems
                         else d.DiagnosticStatus.OK)
         values = {"tables": len(self.plan), "acknowledged": len(self._accepted), "lost_on_uplink": self._lost,
                   "refused_activities": sum(self._refused.values()), "rejected_at_acceptance": sorted(self._rejected),
                   "spi": self.signer.spi if self.signer else None, "frames": len(self._frames)}
+        if yamcs:
+            values["yamcs"] = yamcs
         status.values = [d.KeyValue(key=k, value=json.dumps(v)) for k, v in values.items()]
         self._diag_pub.publish(d.DiagnosticArray(status=[status]))
+
+
+    def destroy_node(self) -> None:
+        if self._yamcs is not None:
+            self._yamcs.close()
+        super().destroy_node()
+
+
+class _YamcsCommanding:
+    """The tables issued to Yamcs from a thread of their own (the node's executor never waits on Yamcs)."""
+
+    def __init__(self, url: str, packets: list[bytes], plan: list[dict[str, Any]]) -> None:
+        from taiji2_ground_pkg.mcs.commanding import YamcsCommander
+        from taiji2_ground_pkg.mcs.yamcs_instance import LINK_NAME
+
+        self._plan = plan
+        self._stop = threading.Event()
+        self.problem = "waiting for Yamcs's ground-station link"
+        self._commander = YamcsCommander(url)  # GroundError (a ValueError) naming a bad address
+        comments = [f"table #{p['tc_seq']} of pass {p['pass']}: {p['activities']} activities released "
+                    f"{p['first_release_s']:g}-{p['last_release_s']:g} s, uplinked from ground time {p['ready_s']:g} s"
+                    for p in plan]
+
+        def issue() -> None:
+            try:
+                if self._commander.wait_for_link(LINK_NAME, stop=self._stop):
+                    self._commander.issue(packets, comments)
+                    self.problem = ""
+            except Exception as exc:  # Yamcs refused or went away: said on /diagnostics, never a crash
+                self.problem = f"tables not issued to Yamcs {url}: {type(exc).__name__}: {exc}"
+
+        self._thread = threading.Thread(target=issue, name="command-planner-yamcs", daemon=True)
+        self._thread.start()
+
+    def plan_with_yamcs_counts(self) -> list[dict[str, Any]] | None:
+        """The plan with ``tc_seq`` = Yamcs's sequence count (``table`` the planner's index), once all are known."""
+        history = self._commander.history()
+        if len(history) < len(self._plan) or any(h["seq_count"] is None for h in history):
+            return None
+        return [{**p, "table": p["tc_seq"], "tc_seq": int(h["seq_count"])}
+                for p, h in zip(self._plan, history, strict=True)]
+
+    def summary(self) -> dict[str, Any]:
+        """Tables issued, per stage the count passed, the failed ones with Yamcs's reason, the problem if any."""
+        history = self._commander.history()
+        stages = ("Queued", "Released", "Sent", "Acceptance", "Execution")
+        return {"issued": len(history), **{s: sum(h[s] == "OK" for h in history) for s in stages},
+                "failed": {k: h["message"] or "failed" for k, h in enumerate(history)
+                           if "NOK" in (h[s] for s in stages) or "TIMEOUT" in (h[s] for s in stages)},
+                "problem": self.problem}
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=10.0)
+        self._commander.close()
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -9,6 +9,14 @@ through its API to reconnect at once, by disabling and enabling the link, made i
 over the first in one run of test_experiment_yamcs.py, and what was in flight on the first, 37 packets, was
 lost: the node does not ask.)
 
+With ``key_file`` set, the node is also the ground station's uplink when the planner commands through Yamcs
+(command_planner ``yamcs_url``): each telecommand Yamcs sends on the link (a TC[11,4] the planner issued,
+with Yamcs's sequence count and CRC) is matched to its table of the plan (``/ground/commanding/plan``, by the
+digest of its application data), and once every planned table has come, they are signed as SDLS-secured TC
+Transfer Frames (in plan order, as the planner signs without Yamcs) and handed to the link
+(``/ground/link/tc``), each held until its pass as planned. A telecommand that is not in the plan (e.g. an
+operator's own) is counted and not uplinked: the link carries one plan per run.
+
 With ``yamcs_url`` set, it also sets the ground's parameters in Yamcs
 (:mod:`taiji2_ground_pkg.mcs.ground_parameters`):
 the latest estimates of G and d of both GRS with their sigma and missing samples
@@ -22,12 +30,16 @@ on ``/ground/yamcs_station`` (latched JSON). Parameters: ``config/yamcs_station.
 from __future__ import annotations
 
 import json
+import threading
 from collections.abc import Sequence
 from typing import Any
 
+from taiji2_ground_pkg.mcs.commanding import table_digest
 from taiji2_ground_pkg.mcs.ground_parameters import estimate_values, reception_values
 from taiji2_ground_pkg.mcs.parameter_writer import ParameterWriter
 from taiji2_ground_pkg.mcs.station import StationFrontEnd
+from taiji2_ground_pkg.nodes.command_planner import PLAN_TOPIC
+from taiji2_ground_pkg.uplink_signer import frame_signer
 from taiji2_runtime import link_topics as lt
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.node_parameters import read_only
@@ -44,8 +56,26 @@ class YamcsStation(rclpy.node.Node):
         dp = self.declare_parameter
         port = int(dp("station_port", 10015, read_only(
             "the TCP port the instance's ground-station link connects to (taiji2 ground serve --station-port)")).value)
+        key_file = str(dp("key_file", "", read_only(
+            "SDLS key file the telecommands from Yamcs are signed with before the uplink (docs/security.md); "
+            "empty: no uplink here")).value)
+        spi = int(dp("spi", -1, read_only("SPI to sign with (-1: the key file's highest active SPI)")).value)
+        first_sequence = int(dp("first_sequence", 1, read_only(
+            "the first frame's SDLS sequence number (IV counter); above the last the spacecraft accepted")).value)
+        self._tc_lock = threading.Lock()
+        self._from_yamcs: dict[str, bytes] = {}  # digest -> the first telecommand of that table Yamcs sent
+        self._tc_repeats = 0
+        self._plan: list[dict[str, Any]] | None = None
+        self._uplinked = 0
+        self._signer, self._key_problem = None, ""
+        if key_file:
+            self._signer, self._key_problem, warning = frame_signer(key_file, spi, first_sequence)
+            if self._key_problem:
+                self.get_logger().error(f"{self._key_problem} (the spacecraft refuses frames without a valid MAC)")
+            elif warning:
+                self.get_logger().warn(warning)
         try:
-            self._station = StationFrontEnd(port)
+            self._station = StationFrontEnd(port, on_telecommand=self._on_telecommand if key_file else None)
         except OSError as exc:  # one error line naming the parameter, not a traceback
             raise ValueError(f"station_port {port}: cannot listen on 127.0.0.1 ({exc.strerror or exc})") from None
         url = str(dp("yamcs_url", "", read_only(
@@ -55,6 +85,11 @@ class YamcsStation(rclpy.node.Node):
         self._end = False
         self.create_subscription(messages.taiji2_msgs.SpacePackets, lt.GROUND_TM, self._on_packets, lt.reliable_all())
         self._parameters = self._parameter_writer(url) if url else None
+        if key_file:
+            self._tc_pub = self.create_publisher(messages.taiji2_msgs.SpacePackets, lt.GROUND_TC, lt.reliable_all())
+            self.create_subscription(messages.std_msgs.String, PLAN_TOPIC, self._on_plan, lt.latched())
+            self._uplink_timer = self.create_timer(0.05, self._uplink, clock=rclpy.clock.Clock(
+                clock_type=rclpy.clock.ClockType.STEADY_TIME))
         self._report_pub = self.create_publisher(messages.std_msgs.String, REPORT_TOPIC, lt.latched())
         self._diag_pub = self.create_publisher(messages.diagnostic_msgs.DiagnosticArray, "/diagnostics", 10)
         self.create_timer(1.0, self._publish_diagnostics,
@@ -75,6 +110,34 @@ class YamcsStation(rclpy.node.Node):
                                  lambda m: writer.update(reception_values(json.loads(m.data))), lt.reliable_all())
         return writer
 
+    def _on_telecommand(self, packet: bytes) -> None:
+        """(The station's reader thread.) One telecommand from Yamcs, kept under its table's digest."""
+        digest = table_digest(packet)
+        with self._tc_lock:
+            if digest in self._from_yamcs:
+                self._tc_repeats += 1
+            else:
+                self._from_yamcs[digest] = packet
+
+    def _on_plan(self, msg: Any) -> None:
+        self._plan = json.loads(msg.data)
+
+    def _uplink(self) -> None:
+        """Once every planned table came from Yamcs: sign them in plan order and hand them to the link."""
+        if self._plan is None or self._signer is None or self._tc_pub.get_subscription_count() == 0:
+            return
+        with self._tc_lock:
+            packets = [self._from_yamcs.get(p["digest"]) for p in self._plan]
+        if any(p is None for p in packets):
+            return
+        frames = [self._signer.sign(p) for p in packets]
+        ready_ns = [round(p["ready_s"] * 1e9) for p in self._plan]
+        self._tc_pub.publish(lt.burst(frames, ready_ns, lt.END_NS, end_of_data=True))
+        self._uplinked = len(frames)
+        self._uplink_timer.cancel()
+        self.get_logger().info(f"{len(frames)} telecommand(s) from Yamcs signed (SPI {self._signer.spi}) and "
+                               "handed to the uplink")
+
     def _on_packets(self, msg: Any) -> None:
         packets = lt.split(msg)
         self._received += len(packets)
@@ -87,6 +150,13 @@ class YamcsStation(rclpy.node.Node):
         """Packets received from the link, written to Yamcs, still queued; Yamcs's connections so far."""
         report = {"received": self._received, "sent": self._station.sent_packets, "queued": self._station.queued(),
                   "connections": self._station.connections, "end_of_data": self._end}
+        if self._signer is not None or self._key_problem:
+            with self._tc_lock:
+                matched = {p["digest"] for p in self._plan or []}
+                report.update(telecommands=self._station.telecommands, planned=len(self._plan or []),
+                              matched=len(matched & set(self._from_yamcs)),
+                              not_in_plan=len(set(self._from_yamcs) - matched) if self._plan is not None else None,
+                              repeated=self._tc_repeats, uplinked=self._uplinked, key_problem=self._key_problem)
         if self._parameters is not None:
             report.update(parameter_pushes=self._parameters.pushes, parameter_failures=self._parameters.failures,
                           parameter_error=self._parameters.last_error)
