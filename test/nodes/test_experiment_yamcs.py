@@ -110,6 +110,12 @@ def test_a_link_run_feeds_yamcs_and_its_archive_calibrates_as_the_ground_recordi
             assert sigma[0] == pytest.approx(np.sqrt(final["com_offset_cov"][i][i]), rel=1e-12)
             assert sigma[1] == ("WARNING" if sigma[0] > COM_OFFSET_REQUIREMENT_M else "IN_LIMITS"), (g, axis, sigma)
     assert values["ground_missing_fraction"] == (0.0, "IN_LIMITS")  # this link loses nothing
+    # the verdict's requirement status (the run's one verdict evaluation), with its alarm
+    verdict = results["verdict"]
+    met = len(verdict["met"]) + bool((verdict["range"] or {}).get("met"))
+    total = len(verdict["over_requirement"]) + (verdict["range"] is not None)
+    assert values["verdict_requirements_met"][0] == met
+    assert values["verdict_requirements_not_met"] == (total - met, "WARNING" if total > met else "IN_LIMITS")
 
 
 def test_a_ground_url_without_a_running_yamcs_is_one_line_before_any_node(tmp_path):

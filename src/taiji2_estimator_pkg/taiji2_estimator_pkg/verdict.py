@@ -197,12 +197,17 @@ class Verdict:
         """Parameters whose error (where the truth is known) is beyond 3 of their reported 1-sigma."""
         return [c for c in self.checks if c.sigma > 0 and abs(c.error) / c.sigma > _ERROR_SIGMAS]
 
-    def lines(self) -> list[str]:
-        """Human-readable: the verdict line, one line per reason, then the warnings."""
-        hours = f"{self.duration_s / 3600:.2f} h"
+    def requirement_counts(self) -> tuple[int, int]:
+        """``(met, total)``: the requirements met and judged (12 parameters, and the range where known)."""
         n, met = len(self.checks), len(self._named("met"))
         if self.range_check is not None:
             n, met = n + 1, met + int(self.range_check.met)
+        return met, n
+
+    def lines(self) -> list[str]:
+        """Human-readable: the verdict line, one line per reason, then the warnings."""
+        hours = f"{self.duration_s / 3600:.2f} h"
+        met, n = self.requirement_counts()
         out = []
         if self.all_met:
             worst = max(self.checks, key=lambda c: c.sigma)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["format_ground", "ground_problem", "ground_summary", "link_count"]
+__all__ = ["format_ground", "ground_problem", "ground_summary", "link_count", "publish_verdict"]
 
 _STAGES = ("Queued", "Released", "Sent", "Acceptance", "Execution")
 
@@ -60,6 +60,21 @@ def ground_summary(url: str, station: dict[str, Any] | None, count_before: int, 
                                       if any(h[s] in ("NOK", "TIMEOUT") for s in _STAGES)],
                            "history": history}
     return out
+
+
+def publish_verdict(url: str, met: int, total: int) -> dict[str, Any]:
+    """Set the verdict's requirement counts as the instance's parameters (``verdict_requirements_met``,
+    ``..._not_met``, WARNING above 0); what was set, or the error (the run's results stand either way)."""
+    from taiji2_ground_pkg.mcs.errors import GroundError
+    from taiji2_ground_pkg.mcs.ground_parameters import verdict_values
+    from taiji2_ground_pkg.mcs.yamcs_api import set_parameters
+
+    values = verdict_values(met, total)
+    try:
+        set_parameters(url, values)
+    except GroundError as exc:
+        return {"error": str(exc)}
+    return values
 
 
 def format_ground(ground: dict[str, Any]) -> str:

@@ -546,6 +546,10 @@ def _report(args: argparse.Namespace, plan: Any, model: Any, link_seed: int, mon
             map(str, link["commanding"]["lost_on_uplink"])) + " never acknowledged")
     # what the link did to the run belongs to the verdict, beside the requirements it leaves unmet
     verdict.warnings.extend(f"link fault: {name}: {text}" for name, text in faults.items())
+    if args.ground:
+        from taiji2_apps.cli.experiment_ground import publish_verdict
+
+        link["yamcs"]["verdict_parameters"] = publish_verdict(args.ground, *verdict.requirement_counts())
     results["maneuver"] = plan.provenance()
     results["link"] = link
     results["verdict"] = verdict.to_dict()

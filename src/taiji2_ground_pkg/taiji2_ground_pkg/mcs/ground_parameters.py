@@ -13,7 +13,9 @@ Alarms (XTCE static alarm ranges, checked by Yamcs on every value):
 * ``grs{g}_d_{axis}_sigma`` [m]: WARNING above the requirement, 100 um
   (:data:`~taiji2_estimator_pkg.report.COM_OFFSET_REQUIREMENT_M`);
 * ``ground_missing_fraction`` (samples declared lost / expected, all streams): WARNING above 1 %, CRITICAL
-  above 10 % (the deep-space link loses about 2 %: a warning an operator looks at, not a failure).
+  above 10 % (the deep-space link loses about 2 %: a warning an operator looks at, not a failure);
+* ``verdict_requirements_not_met``: the requirements the run's verdict finds not met (the one verdict
+  evaluation of ``taiji2 experiment``, set once at the end of a run: :func:`verdict_values`): WARNING above 0.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from yamcs.pymdb import DataSource, FloatEncoding, FloatParameter, System, Thres
 from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
 
 __all__ = ["MISSING_CRITICAL", "MISSING_WARNING", "ParameterSpec", "add_ground_parameters", "estimate_values",
-           "parameter_specs", "reception_values"]
+           "parameter_specs", "reception_values", "verdict_values"]
 
 #: the missing fraction of the ground's data that warns, and that is critical
 MISSING_WARNING = 0.01
@@ -71,6 +73,11 @@ def parameter_specs() -> tuple[ParameterSpec, ...]:
     specs.append(ParameterSpec("ground_released_through_s", "s",
                                "onboard time through which the ground has released every stream"))
     specs.append(ParameterSpec("ground_time_s", "s", "the ground station's time at its last reception"))
+    specs.append(ParameterSpec("verdict_requirements_met", None,
+                               "requirements the last run's verdict finds met (G to 0.3 %, d to 100 um, 1 sigma, "
+                               "both GRS; and the GRS linear range where known)"))
+    specs.append(ParameterSpec("verdict_requirements_not_met", None,
+                               "requirements the last run's verdict finds not met", warning_high=0.0))
     return tuple(specs)
 
 
@@ -120,3 +127,8 @@ def reception_values(record: Mapping[str, Any]) -> dict[str, float]:
               "ground_released_through_s": min(through) if through else math.nan,
               "ground_time_s": float(record.get("ground_time_s") or math.nan)}
     return _finite(values)
+
+
+def verdict_values(met: int, total: int) -> dict[str, float]:
+    """The verdict parameters of a finished run: requirements met and not met (of ``total``)."""
+    return {"verdict_requirements_met": float(met), "verdict_requirements_not_met": float(total - met)}
