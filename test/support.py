@@ -146,3 +146,41 @@ def running_yamcs(data_dir: Path) -> Iterator[object]:
         yield server
     finally:
         server.stop()
+
+
+#: a guard against a hung Yamcs, not a measurement: each step of a commanding test takes Yamcs milliseconds
+YAMCS_HANG_S = 120.0
+
+
+def command_through_yamcs(server, tables: list[bytes], reports: Callable[[list[bytes]], list[bytes]]):
+    """Issue ``tables`` (the planner's TC[11,4]) as commands of the running Yamcs ``server`` (comments
+    ``table k``), take what its link sends at the ground station front end, answer with ``reports(sent)``
+    (onboard TM[1,x] packets) on the same connection and return ``(sent, history)``: the telecommands Yamcs
+    sent and the archived command history once verified."""
+    import datetime as dt
+    import queue
+    import threading
+
+    from taiji2_ground_pkg.mcs.commanding import YamcsCommander
+    from taiji2_ground_pkg.mcs.station import StationFrontEnd
+    from taiji2_ground_pkg.mcs.yamcs_api import wait_for_verification
+    from taiji2_ground_pkg.mcs.yamcs_instance import LINK_NAME
+
+    received: queue.Queue[bytes] = queue.Queue()
+    station = StationFrontEnd(server.station_port, on_telecommand=received.put)
+    commander = YamcsCommander(server.url)
+    try:
+        since = dt.datetime.now(dt.timezone.utc) - dt.timedelta(seconds=1)
+        stop = threading.Event()
+        guard = threading.Timer(YAMCS_HANG_S, stop.set)
+        guard.start()
+        connected = commander.wait_for_link(LINK_NAME, stop=stop)
+        guard.cancel()
+        assert connected, "Yamcs's link never connected"
+        commander.issue(tables, [f"table {k}" for k in range(len(tables))])
+        sent = [received.get(timeout=YAMCS_HANG_S) for _ in tables]
+        station.send(reports(sent))
+        return sent, wait_for_verification(server.url, since, len(tables))
+    finally:
+        commander.close()
+        station.close()

