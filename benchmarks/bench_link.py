@@ -1,6 +1,6 @@
 """The deep-space link (issue 23): a 24-h Type-1 run through the node graph, and G and d unbiased with link loss.
 
-Two studies:
+Three studies:
 
 1. ``graph``: ``taiji2 experiment --link deep_space --duration-s 86400 --record BAG --json`` (one
    pass a day, onboard playback, PUS 11 commanding), its speed against real time (goal >= 100x), and
@@ -16,7 +16,13 @@ Two studies:
    [0.85, 1.15] for every G and d (the std's relative standard error over n seeds is 1/sqrt(2(n-1)):
    10 % at 50 seeds).
 
-    python benchmarks/bench_link.py [--studies graph,mc] [--seeds 50] [--duration-s 10800]
+3. ``yamcs``: the graph run twice back to back, the same seed and maneuver: without a ground on Yamcs, then
+   with ``--ground`` (a Yamcs server started here on a fresh data directory; its time to ready reported,
+   goal <= 15 s) feeding every received packet to Yamcs and commanding through it. Goals: wall time with
+   Yamcs <= 1.25x without; the live estimates of both runs equal (commanding through Yamcs uplinks the
+   same frames at the same times); every table passes Acceptance and Execution in Yamcs's command history.
+
+    python benchmarks/bench_link.py [--studies graph,mc,yamcs] [--seeds 50] [--duration-s 10800]
                                     [--graph-duration-s 86400] [--out DIR] [--baseline]
                                     [--maneuver paper] [--override grs.readout_saturation=false]
 """
@@ -280,9 +286,84 @@ def graph(args: argparse.Namespace) -> None:
     print(f"  live ground estimate vs taiji2 calibrate of the ground bag: worst {worst:.2e} sigma (goal <= 1e-6)")
 
 
+def _proc_cpu_s(pid: int) -> float:
+    """User + system CPU seconds of a live process (Linux /proc), e.g. the Yamcs JVM, which is no child that
+    ``getrusage`` could count."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _experiment(args: argparse.Namespace, out: Path, extra: list[str]) -> tuple[dict, float, float]:
+    """One graph run (no recording); ``(results, wall_s, cpu_s of the experiment and its nodes)``."""
+    env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "74"))
+    cmd = [sys.executable, "-m", "taiji2_apps.cli.main", "experiment", "--link", "deep_space", "--layout", "type1",
+           "--duration-s", str(args.graph_duration_s), "--out", str(out), "--json", "--timeout-s", "20000", *extra]
+    if args.maneuver:
+        cmd += ["--maneuver", args.maneuver]
+    for override in args.override:
+        cmd += ["--override", override]
+    started = time.monotonic()
+    cpu_before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    wall = time.monotonic() - started
+    cpu_after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode not in (0, 3):
+        print(proc.stderr[-3000:])
+        raise SystemExit(f"experiment failed ({proc.returncode})")
+    cpu_s = (cpu_after.ru_utime - cpu_before.ru_utime) + (cpu_after.ru_stime - cpu_before.ru_stime)
+    return json.loads(proc.stdout.strip().splitlines()[-1]), wall, cpu_s
+
+
+def yamcs(args: argparse.Namespace) -> None:
+    """Study 3 (module docstring)."""
+    from taiji2_ground_pkg.mcs.yamcs_server import YamcsServer
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
+    from support import free_port
+
+    out = Path(args.out or tempfile.mkdtemp(prefix="bench-link-yamcs-"))
+    plain, wall_plain, cpu_plain = _experiment(args, out / "without", [])
+    server = YamcsServer(out / "yamcs", http_port=free_port(), station_port=free_port())
+    server.start()
+    try:
+        ready_s = server.wait_ready()
+        jvm_before = _proc_cpu_s(server.process.pid)
+        ground, wall_ground, cpu_ground = _experiment(args, out / "with", [
+            "--ground", server.url, "--station-port", str(server.station_port)])
+        jvm_s = _proc_cpu_s(server.process.pid) - jvm_before
+    finally:
+        server.stop()
+    d = args.graph_duration_s
+    print(f"yamcs: Type-1 {d:g} s through deep_space, back to back (seed 1); Yamcs ready in {ready_s:.1f} s "
+          "(goal <= 15 s)")
+    print(f"  without Yamcs: {wall_plain:.0f} s wall ({d / wall_plain:.0f}x real time), CPU of the experiment and "
+          f"its nodes {cpu_plain:.0f} s")
+    print(f"  with Yamcs:    {wall_ground:.0f} s wall ({d / wall_ground:.0f}x), CPU {cpu_ground:.0f} s + the Yamcs "
+          f"JVM {jvm_s:.0f} s")
+    print(f"  wall with / without = {wall_ground / wall_plain:.3f} (goal <= 1.25); CPU with (JVM included) / "
+          f"without = {(cpu_ground + jvm_s) / cpu_plain:.3f}")
+    worst = 0.0
+    for k in (1, 2):
+        for key, cov in (("scale_factors", "scale_factors_cov"), ("com_offset", "com_offset_cov")):
+            a, b = np.array(ground[f"grs{k}"][key]), np.array(plain[f"grs{k}"][key])
+            sigma = np.sqrt(np.diag(np.array(plain[f"grs{k}"][cov])))
+            worst = max(worst, float(np.nanmax(np.abs(a - b) / sigma)))
+    print(f"  final estimates with vs without Yamcs: worst |difference| / sigma = {worst:.2e} (goal 0: the same frames "
+          "uplinked at the same times)")
+    y = ground["link"]["yamcs"]
+    commands = y.get("commands", {})
+    stages = ("Queued", "Released", "Sent", "Acceptance", "Execution")
+    tables = ground["link"]["commanding"]["tables"]
+    print(f"  packets: the ground received {y['station']['received']}, sent {y['sent']} to Yamcs, its link read "
+          f"{y['read_by_yamcs']}")
+    print(f"  commands: {tables} table(s) planned, {commands.get('issued')} issued in Yamcs; "
+          + ", ".join(f"{s} {commands.get(s)}" for s in stages) + f"; failed {len(commands.get('failed', []))} "
+          "(goal: every table passes every stage)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--studies", default="graph,mc", help="graph, mc, baseline (comma-separated)")
+    parser.add_argument("--studies", default="graph,mc", help="graph, mc, baseline, yamcs (comma-separated)")
     parser.add_argument("--seeds", type=int, default=50)
     parser.add_argument("--duration-s", type=float, default=10800.0, help="MC record length [s]")
     parser.add_argument("--graph-duration-s", type=float, default=86400.0)
@@ -304,6 +385,8 @@ def main() -> None:
         baseline(args)
     if "graph" in studies:
         graph(args)
+    if "yamcs" in studies:
+        yamcs(args)
 
 
 if __name__ == "__main__":

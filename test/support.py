@@ -152,11 +152,13 @@ def running_yamcs(data_dir: Path) -> Iterator[object]:
 YAMCS_HANG_S = 120.0
 
 
-def command_through_yamcs(server, tables: list[bytes], reports: Callable[[list[bytes]], list[bytes]]):
+def command_through_yamcs(server, tables: list[bytes], reports: Callable[[list[bytes]], list[bytes]],
+                          concluded: dict[str, int]):
     """Issue ``tables`` (the planner's TC[11,4]) as commands of the running Yamcs ``server`` (comments
     ``table k``), take what its link sends at the ground station front end, answer with ``reports(sent)``
     (onboard TM[1,x] packets) on the same connection and return ``(sent, history)``: the telecommands Yamcs
-    sent and the archived command history once verified."""
+    sent and the archived command history once the stages the reports conclude (``concluded``: stage ->
+    commands) are concluded."""
     import datetime as dt
     import queue
     import threading
@@ -180,7 +182,7 @@ def command_through_yamcs(server, tables: list[bytes], reports: Callable[[list[b
         commander.issue(tables, [f"table {k}" for k in range(len(tables))])
         sent = [received.get(timeout=YAMCS_HANG_S) for _ in tables]
         station.send(reports(sent))
-        return sent, wait_for_verification(server.url, since, len(tables))
+        return sent, wait_for_verification(server.url, since, concluded)
     finally:
         commander.close()
         station.close()

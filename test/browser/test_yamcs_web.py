@@ -100,7 +100,7 @@ def test_the_command_history_shows_each_table_verified_and_the_late_one_failed_w
         return [encode_report(1, tcs[0], 10**9, 0), encode_report(7, tcs[0], 10**9 + 1, 1),
                 encode_report(1, tcs[1], 10**9 + 2, 2), encode_report(8, tcs[1], 10**9 + 3, 3, FAILURE_LATE, 3)]
 
-    _, history = command_through_yamcs(yamcs, tables, reports)
+    _, history = command_through_yamcs(yamcs, tables, reports, {"Acceptance": 2, "Execution": 2})
     assert [h["Execution"] for h in history] == ["OK", "NOK"], history
     base = f"http://127.0.0.1:{yamcs.http_port}"
     with Browser() as page:

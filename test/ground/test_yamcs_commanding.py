@@ -44,7 +44,7 @@ def test_tables_issued_in_yamcs_are_sent_whole_and_verified_from_the_onboard_rep
                 encode_report(2, sent[2], t_ns + 4, 4, ACCEPTANCE_FAILURE_CODES["crc_error"])]
 
     with running_yamcs(tmp_path / "yamcs") as server:
-        sent, history = command_through_yamcs(server, tables, reports)
+        sent, history = command_through_yamcs(server, tables, reports, {"Acceptance": 3, "Execution": 2})
     # what Yamcs sent is the planner's table: the same application data, a valid PUS-C TC (CRC checked by
     # spacepackets), the count Yamcs gave it, as its command history has it
     tcs = [PusTc.unpack(p) for p in sent]

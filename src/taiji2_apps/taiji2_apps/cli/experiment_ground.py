@@ -44,17 +44,18 @@ def link_count(url: str) -> int:
 
 
 def ground_summary(url: str, station: dict[str, Any] | None, count_before: int, started: Any = None,
-                   tables: int = 0) -> dict[str, Any]:
+                   reported: dict[str, int] | None = None) -> dict[str, Any]:
     """What the station received and sent, and what Yamcs's link read during the run (waiting while the
     link's count still moves toward what was sent); with ``started`` (the run's UTC start), the command
-    history of the ``tables`` issued since (waiting while their verification still moves)."""
+    history of the tables issued since, once Yamcs has verified each stage for which the ground received a
+    report (``reported``: stage -> tables), or its verification has stopped moving."""
     from taiji2_ground_pkg.mcs.yamcs_api import wait_for_link_count, wait_for_verification
 
     sent = int((station or {}).get("sent", 0))
     read = wait_for_link_count(url, sent, since=count_before)
     out: dict[str, Any] = {"url": url, "station": station, "sent": sent, "read_by_yamcs": read}
     if started is not None:
-        history = wait_for_verification(url, started, tables)
+        history = wait_for_verification(url, started, reported or {})
         out["commands"] = {"issued": len(history), **{s: sum(h[s] == "OK" for h in history) for s in _STAGES},
                            "failed": [{"seq_count": h["seq_count"], "message": h["message"]} for h in history
                                       if any(h[s] in ("NOK", "TIMEOUT") for s in _STAGES)],

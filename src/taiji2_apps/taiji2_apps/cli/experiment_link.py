@@ -229,7 +229,11 @@ def commanding_summary(plan: list[dict[str, Any]] | None, reports: list[dict[str
             "refused_activities": sum(r["refused"] for r in failed.values()),
             "refused_late_tables": sorted(k for k, r in failed.items() if r["failure_code"] == 1),
             "lost_on_uplink": sorted(t["tc_seq"] for t in tables if t["tc_seq"] not in accepted),
-            "first_ack_ground_s": min((r["ground_s"] for r in accepted.values()), default=None)}
+            "first_ack_ground_s": min((r["ground_s"] for r in accepted.values()), default=None),
+            # tables with an acceptance (TM[1,1|2]) and an execution (TM[1,7|8]) report received: what a command
+            # history built from these reports can show (a report the downlink lost leaves its stage pending)
+            "reported": {stage: len({r["tc_seq"] for r in reports if r["subtype"] in subtypes})
+                         for stage, subtypes in (("Acceptance", (1, 2)), ("Execution", (7, 8)))}}
 
 
 def pass_of(ground_time_s: float | None, model: Any) -> int | None:
@@ -540,7 +544,7 @@ def _report(args: argparse.Namespace, plan: Any, model: Any, link_seed: int, mon
     if args.ground:
         from taiji2_apps.cli.experiment_ground import ground_summary
 
-        link["yamcs"] = ground_summary(args.ground, monitor.station, *yamcs_before, len(monitor.plan or []))
+        link["yamcs"] = ground_summary(args.ground, monitor.station, *yamcs_before, commanding["reported"])
     if link["commanding"]["lost_on_uplink"]:
         faults["command table lost on uplink"] = ("TC[11,4] #" + ", #".join(
             map(str, link["commanding"]["lost_on_uplink"])) + " never acknowledged")

@@ -185,14 +185,16 @@ def command_history(url: str, since: dt.datetime, command: str = "insert_activit
     return out
 
 
-def wait_for_verification(url: str, since: dt.datetime, expected: int, *, still_s: float = 60.0,
+def wait_for_verification(url: str, since: dt.datetime, concluded: dict[str, int], *, still_s: float = 60.0,
                           poll_s: float = 0.5) -> list[dict[str, Any]]:
-    """:func:`command_history` once ``expected`` commands are there with no stage PENDING, or once it has not
-    changed for ``still_s`` of wall time (Yamcs verifies as the reports come: the bound is on its progress)."""
+    """:func:`command_history` once, for each stage of ``concluded`` (e.g. ``{"Acceptance": 4}``), at least that
+    many commands have it concluded (OK or NOK), or once the history has not changed for ``still_s`` of wall
+    time (Yamcs verifies as the reports come: the bound is on its progress, not on a busy machine)."""
+    def done(history: list[dict[str, Any]]) -> bool:
+        return all(sum(h.get(stage) in ("OK", "NOK") for h in history) >= n for stage, n in concluded.items())
+
     history, still_since = command_history(url, since), time.monotonic()
-    while time.monotonic() - still_since < still_s:
-        if len(history) >= expected and not any(v == "PENDING" for h in history for v in h.values()):
-            break
+    while not done(history) and time.monotonic() - still_since < still_s:
         time.sleep(poll_s)
         now = command_history(url, since)
         if now != history:
