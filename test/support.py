@@ -141,11 +141,18 @@ def running_yamcs(data_dir: Path) -> Iterator[object]:
 
     server = YamcsServer(data_dir, http_port=free_port(), station_port=free_port())
     server.start()
+    before = os.environ.get("YAMCS_CREDENTIALS_FILE")
     try:
         server.wait_ready()
+        # this process and the graphs it starts log in as the operator (authentication is on)
+        os.environ["YAMCS_CREDENTIALS_FILE"] = str(server.credentials_file())
         yield server
     finally:
         server.stop()
+        if before is None:
+            os.environ.pop("YAMCS_CREDENTIALS_FILE", None)
+        else:
+            os.environ["YAMCS_CREDENTIALS_FILE"] = before
 
 
 #: a guard against a hung Yamcs, not a measurement: each step of a commanding test takes Yamcs milliseconds

@@ -65,6 +65,11 @@ class Browser:
         """The value of a JavaScript expression in the page."""
         return self.call("Runtime.evaluate", expression=expression, returnByValue=True)["result"].get("value")
 
+    def pause(self, seconds: float) -> None:
+        """Let the page run for ``seconds`` (a timer inside the page, awaited)."""
+        self.call("Runtime.evaluate", expression=f"new Promise(r => setTimeout(r, {1000 * seconds:.0f}))",
+                  awaitPromise=True)
+
     def text(self) -> str:
         """What the page shows (``document.body.innerText``)."""
         return self.evaluate("document.body ? document.body.innerText : ''") or ""

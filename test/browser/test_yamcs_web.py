@@ -6,6 +6,7 @@ e.g. docs/img; else the test's temporary directory) and its DOM asserted to show
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -14,7 +15,8 @@ from chromium_cdp import Browser, chromium_path
 from spacepackets.ecss.tc import PusTc
 
 from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
-from taiji2_ground_pkg.mcs.yamcs_api import set_parameters
+from taiji2_ground_pkg.mcs.yamcs_api import credentials, set_parameters
+from taiji2_ground_pkg.mcs.yamcs_security import OBSERVER
 from taiji2_runtime.packets.scheduling import FAILURE_LATE, Activity, encode_insert_activities, encode_report
 
 from support import command_through_yamcs, running_yamcs
@@ -41,6 +43,25 @@ MAX_PUSHES = 240
 #: the table rows of a Yamcs list page: each row's cells' text
 ROWS_JS = ("Array.from(document.querySelectorAll('tr')).map("
            "r => Array.from(r.querySelectorAll('td')).map(td => td.innerText.trim()))")
+
+
+def _signed_in(page: Browser, base: str, credentials_file: Path) -> None:
+    """Sign in on Yamcs's login form (authentication is on) with the credentials of ``credentials_file``."""
+    user, password = credentials({"YAMCS_CREDENTIALS_FILE": str(credentials_file)})
+    page.navigate(f"{base}/")
+    for _ in range(MAX_PUSHES):
+        if page.evaluate("!!document.querySelector('input[name=password]')"):
+            break
+        page.pause(0.25)
+    page.evaluate(f"document.querySelector('input[name=username]').value = {json.dumps(user)};"
+                  f"document.querySelector('input[name=password]').value = {json.dumps(password)};"
+                  "document.querySelector('input[name=login]').click()")
+    for _ in range(MAX_PUSHES):
+        text = page.text()
+        if text and "Sign in" not in text and "Loading" not in text:
+            return
+        page.pause(0.25)
+    raise AssertionError(f"not signed in: {page.text()[:300]}")
 
 
 def _shots(tmp_path: Path) -> Path:
@@ -73,6 +94,7 @@ def yamcs(tmp_path_factory):
 def test_the_parameter_page_shows_g_and_d_of_both_grs_with_their_alarms(yamcs, tmp_path):
     base = f"http://127.0.0.1:{yamcs.http_port}"
     with Browser() as page:
+        _signed_in(page, base, yamcs.credentials_file(OBSERVER))  # reading needs no more than an observer
         for g in (1, 2):
             wanted = {k: v for k, v in ESTIMATES.items() if k.startswith(f"grs{g}_")}
             page.navigate(f"{base}/telemetry/parameters?c=taiji2__realtime&filter=grs{g}_")
@@ -81,6 +103,7 @@ def test_the_parameter_page_shows_g_and_d_of_both_grs_with_their_alarms(yamcs, t
                 shown = _shown_values(page)
                 if all(shown.get(k, "-") != "-" for k in wanted):
                     break
+                page.pause(0.5)  # the ground pushes about once a second
             shot = page.screenshot(_shots(tmp_path) / f"yamcs_parameters_grs{g}.png")
             assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and shot.stat().st_size > 10_000
             for name, value in wanted.items():
@@ -104,12 +127,13 @@ def test_the_command_history_shows_each_table_verified_and_the_late_one_failed_w
     assert [h["Execution"] for h in history] == ["OK", "NOK"], history
     base = f"http://127.0.0.1:{yamcs.http_port}"
     with Browser() as page:
+        _signed_in(page, base, yamcs.credentials_file(OBSERVER))
         page.navigate(f"{base}/commanding/history?c=taiji2__realtime")
         for _ in range(MAX_PUSHES):
             rows = [cells for cells in page.evaluate(ROWS_JS) or [] if any("insert_activities" in c for c in cells)]
             if len(rows) >= 2:
                 break
-            page.evaluate("new Promise(r => setTimeout(r, 500))")
+            page.pause(0.5)
         page.screenshot(_shots(tmp_path) / "yamcs_command_history.png")
         completion = sorted(cells[-2] for cells in rows)
         assert completion == ["FAILURE", "SUCCESS"], rows
@@ -119,7 +143,7 @@ def test_the_command_history_shows_each_table_verified_and_the_late_one_failed_w
         for _ in range(MAX_PUSHES):
             if "refused onboard" in page.text():
                 break
-            page.evaluate("new Promise(r => setTimeout(r, 500))")
+            page.pause(0.5)
         page.evaluate("[...document.querySelectorAll('*')].filter(e => !e.children.length && "
                       "e.textContent.includes('refused onboard'))[0]?.scrollIntoView({block: 'center'})")
         page.screenshot(_shots(tmp_path) / "yamcs_command_failed.png")

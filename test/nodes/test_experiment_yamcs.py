@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
-from taiji2_ground_pkg.mcs.yamcs_api import parse_yamcs_url
+from taiji2_ground_pkg.mcs.yamcs_api import connect, parse_yamcs_url
 
 from support import FAST_LINK_YAML, run_taiji2, running_yamcs
 
@@ -30,12 +30,10 @@ def yamcs(tmp_path_factory):
 
 def _parameters(url):
     """Every ground parameter's value and monitoring result in the instance's realtime processor."""
-    from yamcs.client import YamcsClient
-
     from taiji2_ground_pkg.mcs.ground_parameters import parameter_specs
 
     address = parse_yamcs_url(url)
-    client = YamcsClient(address.server)
+    client = connect(address.server)  # as the operator (authentication is on)
     try:
         processor = client.get_processor(address.instance, "realtime")
         found = {}

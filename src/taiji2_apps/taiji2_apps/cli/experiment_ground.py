@@ -20,7 +20,7 @@ _STAGES = ("Queued", "Released", "Sent", "Acceptance", "Execution")
 def ground_problem(url: str, station_port: int) -> str | None:
     """Why the run cannot feed ``url`` (a bad address, no running instance, a bad port); None if it can."""
     from taiji2_ground_pkg.mcs.errors import GroundError
-    from taiji2_ground_pkg.mcs.yamcs_api import instance_state, parse_yamcs_url
+    from taiji2_ground_pkg.mcs.yamcs_api import UNAUTHORIZED, instance_state, parse_yamcs_url
 
     if not 1 <= station_port <= 65535:
         return f"--station-port {station_port}: not a TCP port (1-65535)"
@@ -30,6 +30,9 @@ def ground_problem(url: str, station_port: int) -> str | None:
         return f"--ground {exc}"
     host, port = address.server.rsplit(":", 1)
     state = instance_state(int(port), address.instance, host)
+    if state == UNAUTHORIZED:
+        return (f"--ground {url}: Yamcs refused the login; set YAMCS_CREDENTIALS_FILE to the operator's credentials "
+                "(DIR/credentials/operator.env of taiji2 ground serve --data-dir DIR)")
     if state != "RUNNING":
         return (f"--ground {url}: no running Yamcs instance {address.instance!r} there "
                 f"({'no answer' if state is None else state}); start one with taiji2 ground serve --data-dir DIR")

@@ -92,6 +92,9 @@ def _serve(args: argparse.Namespace) -> int:
         waited = server.wait_ready(args.ready_timeout_s)
         print(f"ground: Yamcs ready in {waited:.1f} s; web interface http://127.0.0.1:{args.http_port}/, "
               f"ground station link on port {args.station_port}; Ctrl-C stops it", file=sys.stderr)
+        print(f"ground: authentication on; credentials (mode 0600): operator {server.credentials_file('operator')}, "
+              f"observer {server.credentials_file('observer')}; clients read them through YAMCS_CREDENTIALS_FILE",
+              file=sys.stderr)
         print(server.url, flush=True)
         server.process.wait()
         print(f"error: taiji2 ground serve: Yamcs exited by itself (status {server.process.returncode}); "

@@ -3,8 +3,9 @@ and the raw packets of the archive for calibration.
 
 A Yamcs address is ``yamcs://HOST:PORT/INSTANCE`` with an optional time range of packet generation times,
 ``?start=ISO&stop=ISO`` (UTC, e.g. ``2035-01-01T00:10:00Z``; start inclusive, stop exclusive). Where Yamcs
-runs with authentication, the user and password come from the environment (``YAMCS_USER``,
-``YAMCS_PASSWORD``), never from the command line, which other users of the machine can read.
+runs with authentication (as ``taiji2 ground serve`` starts it), the user and password come from the
+environment (``YAMCS_USER`` and ``YAMCS_PASSWORD``, or a file named by ``YAMCS_CREDENTIALS_FILE``), never
+from the command line, which other users of the machine can read (:func:`credentials`).
 """
 
 from __future__ import annotations
@@ -13,18 +14,21 @@ import contextlib
 import datetime as dt
 import os
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from taiji2_ground_pkg.mcs.errors import GroundError
 
-__all__ = ["YamcsAddress", "archived_packets", "command_history", "connect", "instance_state", "is_yamcs_url",
-           "link_counts", "parse_yamcs_url", "set_parameters",
+__all__ = ["UNAUTHORIZED", "YamcsAddress", "archived_packets", "command_history", "connect", "credentials",
+           "instance_state", "is_yamcs_url", "link_counts", "parse_yamcs_url", "set_parameters",
            "wait_for_link_count", "wait_for_verification"]
 
 _SCHEME = "yamcs"
+#: what :func:`instance_state` says when the server refuses the login (no or wrong credentials)
+UNAUTHORIZED = "UNAUTHORIZED"
 
 
 @dataclass(frozen=True)
@@ -72,35 +76,59 @@ def parse_yamcs_url(url: str) -> YamcsAddress:
     return YamcsAddress(f"{parts.hostname}:{parts.port}", instance, start, stop)
 
 
-def connect(server: str) -> Any:
-    """A ``yamcs.client.YamcsClient`` of ``server`` (``HOST:PORT``; credentials from the environment)."""
+def credentials(environ: Mapping[str, str] | None = None) -> tuple[str, str] | None:
+    """``(user, password)`` for Yamcs from the environment: ``YAMCS_USER`` and ``YAMCS_PASSWORD``, else the file
+    named by ``YAMCS_CREDENTIALS_FILE`` (``KEY=VALUE`` lines with those two keys, as ``taiji2 ground serve``
+    writes them); None without either. GroundError naming a file that cannot be read or lacks a key."""
+    env = os.environ if environ is None else environ
+    user, password = env.get("YAMCS_USER"), env.get("YAMCS_PASSWORD")
+    if user and password:
+        return user, password
+    path = env.get("YAMCS_CREDENTIALS_FILE")
+    if not path:
+        return None
+    try:
+        lines = Path(path).read_text().splitlines()
+    except OSError as exc:
+        raise GroundError(f"YAMCS_CREDENTIALS_FILE {path}: cannot be read ({exc.strerror or exc})") from None
+    values = dict(line.split("=", 1) for line in lines if "=" in line)
+    if not values.get("YAMCS_USER") or not values.get("YAMCS_PASSWORD"):
+        raise GroundError(f"YAMCS_CREDENTIALS_FILE {path}: needs YAMCS_USER=... and YAMCS_PASSWORD=... lines")
+    return values["YAMCS_USER"], values["YAMCS_PASSWORD"]
+
+
+def connect(server: str, environ: Mapping[str, str] | None = None) -> Any:
+    """A ``yamcs.client.YamcsClient`` of ``server`` (``HOST:PORT``), logged in with :func:`credentials`."""
     from yamcs.client import Credentials, YamcsClient
 
-    user, password = os.environ.get("YAMCS_USER"), os.environ.get("YAMCS_PASSWORD")
-    credentials = Credentials(username=user, password=password) if user and password else None
-    return YamcsClient(server, credentials=credentials)
+    login = credentials(environ)
+    return YamcsClient(server, credentials=Credentials(username=login[0], password=login[1]) if login else None)
 
 
 @contextlib.contextmanager
-def _connected(server: str) -> Iterator[Any]:
+def _connected(server: str, environ: Mapping[str, str] | None = None) -> Iterator[Any]:
     """A client of ``server`` (:func:`connect`), closed after use."""
-    client = connect(server)
+    client = connect(server, environ)
     try:
         yield client
     finally:
         client.close()
 
 
-def instance_state(http_port: int, instance: str = "taiji2", host: str = "127.0.0.1") -> str | None:
-    """The state of ``instance`` (``RUNNING`` when ready), or None while the server does not answer."""
+def instance_state(http_port: int, instance: str = "taiji2", host: str = "127.0.0.1",
+                   environ: Mapping[str, str] | None = None) -> str | None:
+    """The state of ``instance`` (``RUNNING`` when ready), :data:`UNAUTHORIZED` if the server refuses the login,
+    or None while it does not answer."""
     import requests
 
     try:
-        with _connected(f"{host}:{http_port}") as client:
+        with _connected(f"{host}:{http_port}", environ) as client:
             states = {i.name: i.state for i in client.list_instances()}
     except (requests.exceptions.RequestException, OSError):
         return None
     except Exception as exc:  # yamcs-client's own errors (a server still starting answers 503)
+        if type(exc).__name__ == "Unauthorized":
+            return UNAUTHORIZED
         if type(exc).__module__.startswith("yamcs"):
             return None
         raise

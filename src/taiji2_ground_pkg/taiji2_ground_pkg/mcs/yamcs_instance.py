@@ -18,7 +18,9 @@ The instance, as an operator's ground station has it:
   APID and sequence count as the archive's sequence number, and the CRC-16-CCITT of the last two octets
   (a packet whose CRC fails is archived as invalid, never decoded);
 * archiving: the packets (``XtceTmRecorder``), the parameters, the command history, the alarms and the
-  events; the parameter archive filled in real time.
+  events; the parameter archive filled in real time;
+* authentication on: an operator who may command and an observer who may only read
+  (:mod:`.yamcs_security`).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from pathlib import Path
 import yaml
 
 from taiji2_ground_pkg.mcs.xtce import ROOT_CONTAINER, SYSTEM_NAME, write_xtce
+from taiji2_ground_pkg.mcs.yamcs_security import write_security
 
 __all__ = ["INSTANCE", "LINK_NAME", "MISSION_EPOCH_UTC", "instance_config", "processor_config", "server_config",
            "write_instance"]
@@ -134,8 +137,9 @@ def processor_config() -> dict:
 
 
 def write_instance(data_dir: str | Path, *, http_port: int, station_port: int) -> Path:
-    """Write the configuration and the XTCE database into ``data_dir`` (created if missing; the archive in
-    it is kept) and return its ``etc`` directory."""
+    """Write the configuration, the XTCE database and the security configuration (authentication on, the
+    operator's and the observer's credentials made once: :mod:`.yamcs_security`) into ``data_dir`` (created
+    if missing; the archive and the credentials in it are kept) and return its ``etc`` directory."""
     root = Path(data_dir).resolve()
     etc = root / "etc"
     etc.mkdir(parents=True, exist_ok=True)
@@ -145,4 +149,5 @@ def write_instance(data_dir: str | Path, *, http_port: int, station_port: int) -
                          (f"yamcs.{INSTANCE}.yaml", instance_config(station_port)),
                          ("processor.yaml", processor_config())):
         (etc / name).write_text(yaml.safe_dump(config, sort_keys=False))
+    write_security(root)
     return etc

@@ -18,6 +18,7 @@ from typing import IO
 
 from taiji2_ground_pkg.mcs.errors import GroundError
 from taiji2_ground_pkg.mcs.yamcs_instance import INSTANCE, write_instance
+from taiji2_ground_pkg.mcs.yamcs_security import OPERATOR, credentials_path
 
 __all__ = ["YamcsServer", "java_command"]
 
@@ -68,6 +69,14 @@ class YamcsServer:
         """The instance's address, as ``taiji2 calibrate`` and ``experiment --ground`` take it."""
         return f"yamcs://127.0.0.1:{self.http_port}/{INSTANCE}"
 
+    def credentials_file(self, user: str = OPERATOR) -> Path:
+        """``user``'s credentials (``YAMCS_USER``/``YAMCS_PASSWORD`` lines; made at the first start)."""
+        return credentials_path(self.data_dir, user)
+
+    def operator_environ(self) -> dict[str, str]:
+        """An environment whose Yamcs clients log in as the operator (``YAMCS_CREDENTIALS_FILE``)."""
+        return {"YAMCS_CREDENTIALS_FILE": str(self.credentials_file())}
+
     @property
     def log_path(self) -> Path:
         return Path(self.data_dir) / "yamcs.log"
@@ -91,7 +100,7 @@ class YamcsServer:
             if self.process is None or self.process.poll() is not None:
                 raise GroundError(f"Yamcs exited during start (status {self.process and self.process.returncode}); "
                                   f"see {self.log_path}")
-            if instance_state(self.http_port) == "RUNNING":
+            if instance_state(self.http_port, environ=self.operator_environ()) == "RUNNING":
                 return time.monotonic() - t0
             if time.monotonic() - t0 > timeout_s:
                 raise GroundError(f"Yamcs not ready within {timeout_s:g} s; see {self.log_path}")
