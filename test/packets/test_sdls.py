@@ -218,3 +218,43 @@ def test_fuzzed_frames_never_raise_anything_else_and_are_never_accepted():
     assert sum(verifier.refused.values()) == cases == 4000
     assert set(seen) >= {"truncated", "oversized", "bad_fecf", "bad_mac", "replay", "revoked_spi", "out_of_window",
                          "unknown_spi"}, seen
+
+
+# --- the authenticated-encryption service: Yamcs's frames -------------------------------------------------------
+
+#: a frame made by Yamcs 5.12.8's own classes (SecurityAssociationAes256Gcm128 through its TcFrameFactory, driven
+#: from its bundled JavaScript engine on 2026-11-30): spacecraft 0x2A2, VC 0, SPI 5, IV 0 (Yamcs's first), the key
+#: the ASCII of "0123456789abcdef" twice, the packet 1801C000000701020304050607
+YAMCS_KEY = b"0123456789abcdef" * 2
+YAMCS_PACKET = bytes.fromhex("1801C000000701020304050607")
+YAMCS_FRAME = bytes.fromhex("22A2003100" "0005" "000000000000000000000000" "D672610112045E5AEC29848E1F"
+                            "A13246E7F80B6498A143F9AD4D12A5E1" "9C3F")
+
+
+def test_a_frame_yamcs_made_is_verified_and_decrypted():
+    keys = KeyTable([SecurityAssociation(5, YAMCS_KEY, service="authenticated_encryption")])
+    verifier = FrameVerifier(keys)
+    verifier.last_sequence[5] = -1  # Yamcs's IV counter starts at 0, which this verifier's anti-replay refuses
+    assert verifier.verify(YAMCS_FRAME) == YAMCS_PACKET
+    # and our signer of that service makes the same security header, ciphertext and MAC from the same IV (the
+    # frame sequence number, outside the masked header, and with it the FECF may differ)
+    signer = FrameSigner(keys, 5, first_sequence=1)
+    ours = signer.sign(YAMCS_PACKET)
+    iv1 = (1).to_bytes(12, "big")
+    expected = AESGCM(YAMCS_KEY).encrypt(iv1, YAMCS_PACKET, bytes([0, 0, 0, 0, 0, 0, 5]) + bytes(12))
+    assert ours[5:7] == b"\x00\x05" and ours[7:19] == iv1 and ours[19:-2] == expected
+    assert verifier.verify(ours) == YAMCS_PACKET  # IV 1, after Yamcs's 0
+
+
+def test_the_authenticated_encryption_service_refuses_tampering_and_the_other_service():
+    keys = KeyTable([SecurityAssociation(5, YAMCS_KEY, service="authenticated_encryption")])
+    for k in (7, 19, 25, len(YAMCS_FRAME) - 10):  # SPI, ciphertext, MAC: each flipped bit is refused
+        frame = bytearray(YAMCS_FRAME)
+        frame[k] ^= 0x01
+        verifier = FrameVerifier(keys)
+        verifier.last_sequence[5] = -1
+        assert _reason(verifier, _refit_fecf(frame)) in ("bad_mac", "unknown_spi"), k
+    # the same key under the authentication service does not accept Yamcs's frame (the services differ)
+    clear = FrameVerifier(KeyTable([SecurityAssociation(5, YAMCS_KEY)]))
+    clear.last_sequence[5] = -1
+    assert _reason(clear, YAMCS_FRAME) == "bad_mac"

@@ -5,12 +5,21 @@ A secured frame (:mod:`.tc_frame`) is::
     primary header (5) | security header: SPI (2) + IV (12) | frame data (the telecommand packet) |
     security trailer: MAC (16) | FECF (2)
 
-The MAC is the tag of AES-256-GCM (``cryptography``) with an empty plaintext and as additional authenticated
-data everything from the primary header to the end of the frame data: the data travel in the clear, the tag
-covers the headers and the data (GMAC; the authentication service of SDLS, as NASA's CryptoLib and Yamcs do
-it, with no bit masks: every header bit is covered). The IV is a 96-bit big-endian counter per SPI that also
-serves as the anti-replay sequence number: the ground counts up from 1; onboard a frame is accepted only if
-its counter is above the last accepted one of its SPI and at most :data:`DEFAULT_REPLAY_WINDOW` above it (a
+Each SPI has one of two SDLS services (its key table entry, :mod:`.sdls_keys`):
+
+* ``authentication`` (the default): the MAC is the tag of AES-256-GCM (``cryptography``) with an empty
+  plaintext and as additional authenticated data everything from the primary header to the end of the frame
+  data: the data travel in the clear, the tag covers the headers and the data (GMAC; the authentication
+  service of SDLS, with no bit masks: every header bit is covered);
+* ``authenticated_encryption``: the frame data are AES-256-GCM encrypted and the tag's additional
+  authenticated data is the primary and security header under SDLS's authentication bit mask (the virtual
+  channel id and the SPI kept, every other bit zeroed: 19 octets), as Yamcs 5.12's
+  ``SecurityAssociationAes256Gcm128`` makes frames on its ``UdpTcFrameLink`` (test/packets/test_sdls.py
+  checks a frame Yamcs made). The zeroed header fields (spacecraft id, length, frame sequence number) are
+  then not authenticated; the verifier checks them in the clear as for every frame.
+
+The IV is a 96-bit big-endian counter per SPI that also serves as the anti-replay sequence number: the
+ground counts up from 1; onboard a frame is accepted only if its counter is above the last accepted one of its SPI and at most :data:`DEFAULT_REPLAY_WINDOW` above it (a
 window for frames lost on the uplink, e.g. a whole pass's).
 
 :class:`FrameVerifier` checks, in this order, and refuses with a reason (:data:`REFUSAL_REASONS`):
@@ -37,7 +46,7 @@ from spacepackets.ecss.tm import PusTm
 from taiji2_runtime.packets.cuc import CucError, cuc_pack, cuc_unpack_ns
 from taiji2_runtime.packets.packetize import SEQ_MODULO, PacketError
 from taiji2_runtime.packets.scheduling import REPORT_APID
-from taiji2_runtime.packets.sdls_keys import ACTIVE, KeyTable
+from taiji2_runtime.packets.sdls_keys import ACTIVE, AUTHENTICATED_ENCRYPTION, KeyTable
 from taiji2_runtime.packets.tc_frame import (
     FECF_OCTETS,
     HEADER_OCTETS,
@@ -87,6 +96,12 @@ def _aad_and_mac(frame: bytes) -> tuple[bytes, bytes]:
     return frame[:-FECF_OCTETS - MAC_OCTETS], frame[-FECF_OCTETS - MAC_OCTETS:-FECF_OCTETS]
 
 
+def _masked_header(header: bytes, spi: int) -> bytes:
+    """The authenticated-encryption service's additional authenticated data: the primary header with only its
+    virtual channel id kept, the SPI, the IV zeroed (SDLS's authentication bit mask, as Yamcs applies it)."""
+    return bytes([0, 0, header[2] & 0xFC, 0, 0]) + spi.to_bytes(SPI_OCTETS, "big") + bytes(IV_OCTETS)
+
+
 class FrameSigner:
     """The ground's side: secured frames of one SPI, the IV counting up from ``first_sequence``."""
 
@@ -98,6 +113,7 @@ class FrameSigner:
         if not 0 < first_sequence < 2 ** (8 * IV_OCTETS):
             raise ValueError(f"first sequence {first_sequence}: 1..2^96-1")
         self.spi = sa.spi
+        self.service = sa.service
         self._aead = AESGCM(sa.key)
         self.next_sequence = int(first_sequence)
         self._frame_count = 0
@@ -113,8 +129,13 @@ class FrameSigner:
         iv = self.next_sequence.to_bytes(IV_OCTETS, "big")
         octets = HEADER_OCTETS + SECURITY_HEADER_OCTETS + len(data) + MAC_OCTETS + FECF_OCTETS
         header = TcFrameHeader(self._scid, self._vcid, octets, self._frame_count & 0xFF).pack()
-        aad = header + self.spi.to_bytes(SPI_OCTETS, "big") + iv + bytes(data)
-        body = aad + self._aead.encrypt(iv, b"", aad)
+        security_header = self.spi.to_bytes(SPI_OCTETS, "big") + iv
+        if self.service == AUTHENTICATED_ENCRYPTION:
+            # ciphertext || tag, the tag over the masked header
+            body = header + security_header + self._aead.encrypt(iv, bytes(data), _masked_header(header, self.spi))
+        else:
+            aad = header + security_header + bytes(data)
+            body = aad + self._aead.encrypt(iv, b"", aad)
         frame = body + frame_crc(body).to_bytes(FECF_OCTETS, "big")
         self.next_sequence += 1
         self._frame_count += 1
@@ -210,9 +231,13 @@ class FrameVerifier:
         if sa.state != ACTIVE:
             raise FrameRefused("revoked_spi", f"SPI {spi} is revoked", spi)
         iv = field_[SPI_OCTETS:SECURITY_HEADER_OCTETS]
-        aad, mac = _aad_and_mac(frame)
         try:
-            self._aead[spi].decrypt(iv, mac, aad)
+            if sa.service == AUTHENTICATED_ENCRYPTION:
+                data = self._aead[spi].decrypt(iv, field_[SECURITY_HEADER_OCTETS:], _masked_header(frame, spi))
+            else:
+                aad, mac = _aad_and_mac(frame)
+                self._aead[spi].decrypt(iv, mac, aad)
+                data = field_[SECURITY_HEADER_OCTETS:-MAC_OCTETS]
         except InvalidTag:
             raise FrameRefused("bad_mac", f"SPI {spi}: the MAC does not authenticate the frame", spi) from None
         sequence = int.from_bytes(iv, "big")
@@ -225,7 +250,7 @@ class FrameVerifier:
                                                 f"{self.window} above the last accepted {last}", spi)
         self.last_sequence[spi] = sequence
         self._last_spi = spi
-        return field_[SECURITY_HEADER_OCTETS:-MAC_OCTETS]
+        return bytes(data)
 
     def report(self, clear_flags: bool = True) -> FrameSecurityReport:
         """The frame security report now; its bad-SN/MAC/SA flags cover the refusals since the previous report."""

@@ -8,6 +8,9 @@ A key file is JSON, kept **outside the repository** (none is committed) and read
 
 ``state`` is ``active`` or ``revoked``: the onboard side refuses every frame of a revoked SPI, the ground signs
 with an active one (by default the highest active SPI: keys rotate by adding a new SPI and revoking the old).
+``service`` (optional) is the SDLS service of the SPI: ``authentication`` (the default: the data in the clear,
+the MAC over the headers and the data) or ``authenticated_encryption`` (the data encrypted, the MAC over the
+masked header, as Yamcs's ``SecurityAssociationAes256Gcm128`` makes frames; :mod:`.sdls`).
 SPI 0 and 0xFFFF are reserved (no security association). :func:`write_key_file` makes one (mode 0600).
 """
 
@@ -21,14 +24,18 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["ACTIVE", "KEY_FILE_FORMAT", "KEY_OCTETS", "REVOKED", "KeyFileError", "KeyTable", "SecurityAssociation",
-           "key_file_warning", "load_key_file", "new_key_table", "write_key_file"]
+__all__ = ["ACTIVE", "AUTHENTICATED_ENCRYPTION", "AUTHENTICATION", "KEY_FILE_FORMAT", "KEY_OCTETS", "REVOKED",
+           "SERVICES", "KeyFileError", "KeyTable", "SecurityAssociation", "key_file_warning", "load_key_file",
+           "new_key_table", "write_key_file"]
 
 KEY_FILE_FORMAT = "taiji2-sdls-keys/1"
 KEY_OCTETS = 32  # AES-256
 ACTIVE = "active"
 REVOKED = "revoked"
 _STATES = (ACTIVE, REVOKED)
+AUTHENTICATION = "authentication"
+AUTHENTICATED_ENCRYPTION = "authenticated_encryption"
+SERVICES = (AUTHENTICATION, AUTHENTICATED_ENCRYPTION)
 
 
 class KeyFileError(ValueError):
@@ -37,11 +44,12 @@ class KeyFileError(ValueError):
 
 @dataclass(frozen=True)
 class SecurityAssociation:
-    """One SPI's key and state (the key is left out of the repr)."""
+    """One SPI's key, state and SDLS service (the key is left out of the repr)."""
 
     spi: int
     key: bytes = field(repr=False)
     state: str = ACTIVE
+    service: str = AUTHENTICATION
 
     def __post_init__(self) -> None:
         if not 0 < self.spi < 0xFFFF:
@@ -50,6 +58,8 @@ class SecurityAssociation:
             raise ValueError(f"SPI {self.spi}: key of {len(self.key)} octets, AES-256 needs {KEY_OCTETS}")
         if self.state not in _STATES:
             raise ValueError(f"SPI {self.spi}: state {self.state!r}, one of {', '.join(_STATES)}")
+        if self.service not in SERVICES:
+            raise ValueError(f"SPI {self.spi}: service {self.service!r}, one of {', '.join(SERVICES)}")
 
 
 class KeyTable:
@@ -81,11 +91,15 @@ class KeyTable:
     def with_state(self, spi: int, state: str) -> KeyTable:
         """A copy with ``spi``'s state changed (KeyError if unknown)."""
         sa = self._by_spi[spi]
-        return KeyTable([*(s for s in self._by_spi.values() if s.spi != spi), SecurityAssociation(spi, sa.key, state)])
+        return KeyTable([*(s for s in self._by_spi.values() if s.spi != spi),
+                         SecurityAssociation(spi, sa.key, state, sa.service)])
 
     def to_json(self) -> str:
-        return json.dumps({"format": KEY_FILE_FORMAT, "keys": [{"spi": sa.spi, "key": sa.key.hex(), "state": sa.state}
-                                                              for sa in self]}, indent=1) + "\n"
+        def entry(sa: SecurityAssociation) -> dict:
+            extra = {} if sa.service == AUTHENTICATION else {"service": sa.service}
+            return {"spi": sa.spi, "key": sa.key.hex(), "state": sa.state, **extra}
+
+        return json.dumps({"format": KEY_FILE_FORMAT, "keys": [entry(sa) for sa in self]}, indent=1) + "\n"
 
 
 def new_key_table(spis: Iterable[int] = (1,), revoked: Iterable[int] = ()) -> KeyTable:
@@ -124,12 +138,13 @@ def load_key_file(path: str | Path) -> KeyTable:
     out = []
     for k, entry in enumerate(doc["keys"]):
         try:
-            if not isinstance(entry, dict) or set(entry) - {"spi", "key", "state"}:
-                raise ValueError("an object of spi, key, state")
+            if not isinstance(entry, dict) or set(entry) - {"spi", "key", "state", "service"}:
+                raise ValueError("an object of spi, key, state and optionally service")
             spi, key = entry["spi"], entry["key"]
             if not isinstance(spi, int) or not isinstance(key, str):
                 raise ValueError("spi an integer, key hex digits")
-            out.append(SecurityAssociation(spi, bytes.fromhex(key), entry.get("state", ACTIVE)))
+            out.append(SecurityAssociation(spi, bytes.fromhex(key), entry.get("state", ACTIVE),
+                                           entry.get("service", AUTHENTICATION)))
         except (KeyError, ValueError) as exc:
             raise KeyFileError(f"key file {path}: entry {k}: {exc}") from None
     try:
