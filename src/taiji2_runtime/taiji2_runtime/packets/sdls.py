@@ -19,8 +19,9 @@ Each SPI has one of two SDLS services (its key table entry, :mod:`.sdls_keys`):
   then not authenticated; the verifier checks them in the clear as for every frame.
 
 The IV is a 96-bit big-endian counter per SPI that also serves as the anti-replay sequence number: the
-ground counts up from 1; onboard a frame is accepted only if its counter is above the last accepted one of its SPI and at most :data:`DEFAULT_REPLAY_WINDOW` above it (a
-window for frames lost on the uplink, e.g. a whole pass's).
+ground counts up from 1; onboard a frame is accepted only if its counter is above the last accepted one of
+its SPI and at most :data:`DEFAULT_REPLAY_WINDOW` above it (a window for frames lost on the uplink, e.g. a
+whole pass's).
 
 :class:`FrameVerifier` checks, in this order, and refuses with a reason (:data:`REFUSAL_REASONS`):
 ``truncated``/``oversized`` (octets against the length field and the maximum), ``bad_fecf``, ``bad_header``
