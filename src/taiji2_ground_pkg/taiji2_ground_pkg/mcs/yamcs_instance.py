@@ -25,16 +25,20 @@ The instance, as an operator's ground station has it:
 
 from __future__ import annotations
 
+import os
 import secrets
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
 
 from taiji2_ground_pkg.mcs.xtce import ROOT_CONTAINER, SYSTEM_NAME, write_xtce
 from taiji2_ground_pkg.mcs.yamcs_security import write_security
+from taiji2_runtime.packets.sdls import IV_OCTETS
+from taiji2_runtime.packets.tc_frame import MAX_FRAME_OCTETS, SPACECRAFT_ID, TC_VCID
 
-__all__ = ["INSTANCE", "LINK_NAME", "MISSION_EPOCH_UTC", "instance_config", "processor_config", "server_config",
-           "write_instance"]
+__all__ = ["FRAME_LINK_NAME", "FRAME_STREAM", "INSTANCE", "LINK_NAME", "MISSION_EPOCH_UTC", "SdlsFrameLink",
+           "instance_config", "processor_config", "server_config", "write_instance"]
 
 INSTANCE = "taiji2"
 #: the data link that reads the ground station front end
@@ -62,8 +66,51 @@ def server_config(http_port: int) -> dict:
     }
 
 
-def instance_config(station_port: int) -> dict:
-    """``etc/yamcs.taiji2.yaml``: archive services, the ground station link, the XTCE database, streams."""
+@dataclass(frozen=True)
+class SdlsFrameLink:
+    """Yamcs's own SDLS-secured TC frames (its ``UdpTcFrameLink``, one frame per UDP datagram to
+    ``127.0.0.1:port``): the key of ``spi`` (written raw into ``etc/``, mode 0600, as Yamcs reads it), its IV
+    counter from ``first_sequence`` (Yamcs keeps it in the instance's database across restarts). Commands
+    issued on the stream :data:`FRAME_STREAM` go out this way (authenticated encryption: Yamcs 5.12.8 has no
+    authentication-only service; docs/security.md)."""
+
+    key: bytes = field(repr=False)
+    spi: int
+    port: int
+    first_sequence: int = 1
+
+
+#: the stream of the commands Yamcs sends as SDLS-secured frames (with an :class:`SdlsFrameLink`)
+FRAME_STREAM = "tc_frames"
+#: the frame link's name
+FRAME_LINK_NAME = "ground-station-frames"
+
+
+def _frame_link(frames: SdlsFrameLink, key_file: str) -> dict:
+    return {
+        "name": FRAME_LINK_NAME,
+        "class": "org.yamcs.tctm.ccsds.UdpTcFrameLink",
+        "host": "127.0.0.1",
+        "port": int(frames.port),
+        "spacecraftId": SPACECRAFT_ID,
+        "maxFrameLength": MAX_FRAME_OCTETS,
+        "errorDetection": "CRC16",
+        "encryption": [{"spi": int(frames.spi),
+                        "class": "org.yamcs.security.sdls.SecurityAssociationAes256Gcm128Factory",
+                        "args": {"keyFile": key_file,
+                                 "initialSeqNum": frames.first_sequence.to_bytes(IV_OCTETS, "big").hex()}}],
+        "virtualChannels": [{
+            "vcId": TC_VCID, "service": "PACKET", "encryptionSpi": int(frames.spi), "stream": FRAME_STREAM,
+            "multiplePacketsPerFrame": False, "useCop1": False,  # one whole packet per Type-BD frame, as ours
+            "commandPostprocessorClassName": "org.yamcs.pus.PusCommandPostprocessor",
+            "commandPostprocessorArgs": {"errorDetection": {"type": "CRC-16-CCIIT"}},
+        }],
+    }
+
+
+def instance_config(station_port: int, frames: SdlsFrameLink | None = None, key_file: str = "") -> dict:
+    """``etc/yamcs.taiji2.yaml``: archive services, the ground station link (and Yamcs's own SDLS frame link
+    with ``frames``, its key at ``key_file`` relative to the data directory), the XTCE database, streams."""
     return {
         "services": [
             {"class": "org.yamcs.archive.XtceTmRecorder"},
@@ -96,7 +143,7 @@ def instance_config(station_port: int) -> dict:
             # which the verifiers match with the onboard reports) and CRC
             "commandPostprocessorClassName": "org.yamcs.pus.PusCommandPostprocessor",
             "commandPostprocessorArgs": {"errorDetection": {"type": "CRC-16-CCIIT"}},
-        }],
+        }, *([_frame_link(frames, key_file)] if frames else [])],
         "mdb": [{"type": "xtce", "args": {"file": "mdb/taiji2.xml"}}],
         "streamConfig": {
             "tm": [{"name": "tm_realtime", "processor": "realtime"}, {"name": "tm_dump"}],
@@ -104,7 +151,8 @@ def instance_config(station_port: int) -> dict:
             "event": ["events_realtime", "events_dump"],
             "param": ["pp_realtime", "pp_dump", "sys_param", "proc_param"],
             "parameterAlarm": ["alarms_realtime"],
-            "tc": [{"name": "tc_realtime", "processor": "realtime"}],
+            "tc": [{"name": "tc_realtime", "processor": "realtime"},
+                   *([{"name": FRAME_STREAM, "processor": "realtime"}] if frames else [])],
         },
     }
 
@@ -136,7 +184,8 @@ def processor_config() -> dict:
     }
 
 
-def write_instance(data_dir: str | Path, *, http_port: int, station_port: int) -> Path:
+def write_instance(data_dir: str | Path, *, http_port: int, station_port: int,
+                   frames: SdlsFrameLink | None = None) -> Path:
     """Write the configuration, the XTCE database and the security configuration (authentication on, the
     operator's and the observer's credentials made once: :mod:`.yamcs_security`) into ``data_dir`` (created
     if missing; the archive and the credentials in it are kept) and return its ``etc`` directory."""
@@ -145,8 +194,14 @@ def write_instance(data_dir: str | Path, *, http_port: int, station_port: int) -
     etc.mkdir(parents=True, exist_ok=True)
     (root / "mdb").mkdir(exist_ok=True)
     write_xtce(root / "mdb" / "taiji2.xml")
+    key_file = ""
+    if frames is not None:
+        key_file = f"etc/sdls-spi{int(frames.spi)}.key"
+        descriptor = os.open(root / key_file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(descriptor, "wb") as f:
+            f.write(frames.key)
     for name, config in (("yamcs.yaml", server_config(http_port)),
-                         (f"yamcs.{INSTANCE}.yaml", instance_config(station_port)),
+                         (f"yamcs.{INSTANCE}.yaml", instance_config(station_port, frames, key_file)),
                          ("processor.yaml", processor_config())):
         (etc / name).write_text(yaml.safe_dump(config, sort_keys=False))
     write_security(root)

@@ -42,7 +42,9 @@ def roles_config() -> dict:
     """``etc/roles.yaml``: the object privileges are regular expressions on qualified names."""
     return {
         "Operator": {**_READ, "Command": [f"/{SYSTEM_NAME}/.*"], "WriteParameter": [f"/{SYSTEM_NAME}/.*"],
-                     "System": [*_READ["System"], "ControlCommandQueue", "ControlLinks", "ControlAlarms"]},
+                     "Stream": ["tc_.*"],  # the command streams (issuing on one names it)
+                     "System": [*_READ["System"], "ControlCommandQueue", "ControlLinks", "ControlAlarms",
+                                "CommandOptions"]},
         "Observer": dict(_READ),
     }
 

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import IO
 
 from taiji2_ground_pkg.mcs.errors import GroundError
-from taiji2_ground_pkg.mcs.yamcs_instance import INSTANCE, write_instance
+from taiji2_ground_pkg.mcs.yamcs_instance import INSTANCE, SdlsFrameLink, write_instance
 from taiji2_ground_pkg.mcs.yamcs_security import OPERATOR, credentials_path
 
 __all__ = ["YamcsServer", "java_command"]
@@ -56,11 +56,14 @@ class YamcsServer:
         The HTTP API and web interface, on 127.0.0.1.
     station_port : int
         Where the ground station front end listens for Yamcs's data link (:mod:`.station`).
+    frames : SdlsFrameLink, optional
+        Also Yamcs's own SDLS-secured TC frame link (UDP, its key and SPI).
     """
 
     data_dir: Path
     http_port: int = 8090
     station_port: int = 10015
+    frames: SdlsFrameLink | None = None
     process: subprocess.Popen | None = field(default=None, init=False)
     _log: IO[bytes] | None = field(default=None, init=False)
 
@@ -84,7 +87,7 @@ class YamcsServer:
     def start(self) -> None:
         """Write the configuration and start Java (returns at once; :meth:`wait_ready` waits)."""
         root = Path(self.data_dir).resolve()
-        etc = write_instance(root, http_port=self.http_port, station_port=self.station_port)
+        etc = write_instance(root, http_port=self.http_port, station_port=self.station_port, frames=self.frames)
         command = java_command(etc, root)
         self._log = open(self.log_path, "ab")  # held for the server's life
         self.process = subprocess.Popen(command, cwd=root, stdout=self._log, stderr=subprocess.STDOUT,
