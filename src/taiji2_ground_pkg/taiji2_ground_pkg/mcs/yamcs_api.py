@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import datetime as dt
 import os
+import threading
 import time
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -105,14 +106,31 @@ def connect(server: str, environ: Mapping[str, str] | None = None) -> Any:
     return YamcsClient(server, credentials=Credentials(username=login[0], password=login[1]) if login else None)
 
 
+#: logged-in clients by (server, login, thread): Yamcs refuses more than 5 logins a second from one address (429,
+#: its brute-force guard), and the ground's clients all run on this host, polling (the station's parameters once
+#: a second, the experiment's link counts every 0.2 s): each logs in once per thread and keeps its session
+_CLIENTS: dict[tuple, Any] = {}
+_CLIENTS_LOCK = threading.Lock()
+
+
 @contextlib.contextmanager
 def _connected(server: str, environ: Mapping[str, str] | None = None) -> Iterator[Any]:
-    """A client of ``server`` (:func:`connect`), closed after use."""
-    client = connect(server, environ)
+    """A logged-in client of ``server`` (:func:`connect`), kept for this thread's next calls; dropped (and the
+    next call logs in again) when a call through it fails."""
+    key = (server, credentials(environ), threading.get_ident())
+    with _CLIENTS_LOCK:
+        client = _CLIENTS.get(key)
+    if client is None:
+        client = connect(server, environ)
+        with _CLIENTS_LOCK:
+            _CLIENTS[key] = client
     try:
         yield client
-    finally:
+    except BaseException:
+        with _CLIENTS_LOCK:
+            _CLIENTS.pop(key, None)
         client.close()
+        raise
 
 
 def instance_state(http_port: int, instance: str = "taiji2", host: str = "127.0.0.1",
