@@ -135,11 +135,13 @@ def free_port() -> int:
 
 
 @contextlib.contextmanager
-def running_yamcs(data_dir: Path) -> Iterator[object]:
-    """A Yamcs server of the project's instance on ``data_dir`` (free ports), ready, stopped at the end."""
+def running_yamcs(data_dir: Path, frames: object = None) -> Iterator[object]:
+    """A Yamcs server of the project's instance on ``data_dir`` (free ports; with Yamcs's own SDLS frame link
+    where ``frames`` is a :class:`~taiji2_ground_pkg.mcs.yamcs_instance.SdlsFrameLink`), ready, stopped at the
+    end."""
     from taiji2_ground_pkg.mcs.yamcs_server import YamcsServer
 
-    server = YamcsServer(data_dir, http_port=free_port(), station_port=free_port())
+    server = YamcsServer(data_dir, http_port=free_port(), station_port=free_port(), frames=frames)
     server.start()
     before = os.environ.get("YAMCS_CREDENTIALS_FILE")
     try:

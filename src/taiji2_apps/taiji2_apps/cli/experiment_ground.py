@@ -10,9 +10,12 @@ each table's command history (``link.yamcs``).
 
 from __future__ import annotations
 
+import argparse
+from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["format_ground", "ground_problem", "ground_summary", "link_count", "publish_verdict"]
+__all__ = ["YamcsFrames", "format_ground", "ground_problem", "ground_summary", "link_count", "publish_verdict",
+           "yamcs_signs_frames"]
 
 _STAGES = ("Queued", "Released", "Sent", "Acceptance", "Execution")
 
@@ -37,6 +40,52 @@ def ground_problem(url: str, station_port: int) -> str | None:
         return (f"--ground {url}: no running Yamcs instance {address.instance!r} there "
                 f"({'no answer' if state is None else state}); start one with taiji2 ground serve --data-dir DIR")
     return None
+
+
+@dataclass(frozen=True)
+class YamcsFrames:
+    """Yamcs signs the telecommands itself: issued on ``stream``, they come as SDLS frames of ``spi`` to the
+    station's UDP ``port``."""
+
+    spi: int
+    port: int
+    stream: str
+
+
+def yamcs_signs_frames(args: argparse.Namespace) -> tuple[YamcsFrames | None, str]:
+    """Whether the instance at ``--ground`` signs its own SDLS frames (it has the frame link) and, if so, whether
+    this run can fly them: ``--key-file`` must hold that SPI with the authenticated-encryption service (the
+    spacecraft's key table). Sets Yamcs's next IV to 1: the emulated spacecraft's counters start at 0 each
+    run. ``(frames or None, problem or "")``."""
+    from taiji2_ground_pkg.mcs.errors import GroundError
+    from taiji2_ground_pkg.mcs.yamcs_api import frame_link_spis, set_frame_sequence
+    from taiji2_ground_pkg.mcs.yamcs_instance import FRAME_LINK_NAME, FRAME_STREAM
+    from taiji2_runtime.packets.sdls_keys import AUTHENTICATED_ENCRYPTION, KeyFileError, load_key_file
+
+    try:
+        spis = frame_link_spis(args.ground, FRAME_LINK_NAME)
+    except GroundError as exc:
+        return None, f"--ground {exc}"
+    if not spis:
+        return None, ""  # Yamcs sends packets; the station signs them
+    spi = spis[0]
+    if not args.key_file:
+        return None, (f"--ground {args.ground} signs telecommands itself (SDLS SPI {spi}): give the spacecraft its "
+                      "key with --key-file (the file given to taiji2 ground serve --sdls-key-file)")
+    try:
+        sa = load_key_file(args.key_file).get(spi)
+    except KeyFileError as exc:
+        return None, f"--key-file {exc}"
+    if sa is None or sa.service != AUTHENTICATED_ENCRYPTION:
+        return None, (f"--key-file {args.key_file}: Yamcs signs with SPI {spi}, which the file "
+                      f"{'lacks' if sa is None else 'has with service ' + sa.service}: the spacecraft would refuse "
+                      "every frame")
+    port = args.station_port + 1 if args.frame_port < 0 else args.frame_port
+    try:
+        set_frame_sequence(args.ground, FRAME_LINK_NAME, spi, 1)
+    except GroundError as exc:
+        return None, f"--ground {exc}"
+    return YamcsFrames(spi, port, FRAME_STREAM), ""
 
 
 def link_count(url: str) -> int:

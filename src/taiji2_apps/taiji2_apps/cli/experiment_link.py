@@ -53,6 +53,10 @@ def add_link_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--station-port", type=int, default=10015, metavar="PORT",
                         help="with --ground: the port the instance's ground-station link connects to "
                              "(taiji2 ground serve --station-port; default 10015)")
+    parser.add_argument("--frame-port", type=int, default=-1, metavar="PORT",
+                        help="with --ground on a Yamcs that signs its own SDLS frames (ground serve --sdls-key-file, "
+                             "then give the same --key-file here): the UDP port they come to (default the station "
+                             "port + 1, as ground serve)")
 
 
 def estimate_stamps_ns(msg: Any) -> tuple[int, int]:
@@ -361,7 +365,7 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
               f"onboard ({start_s:g} s)", file=sys.stderr)
         return ExitStatus.BAD_INPUT
     from taiji2_apps.cli.experiment_attack import attack_kinds, leaked_key_file
-    from taiji2_apps.cli.experiment_ground import ground_problem, link_count
+    from taiji2_apps.cli.experiment_ground import ground_problem, link_count, yamcs_signs_frames
 
     problem = ground_problem(args.ground, args.station_port) if args.ground else None
     if problem:
@@ -369,6 +373,10 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
         return ExitStatus.BAD_INPUT
     # the link's count and the time before the run: what Yamcs read, and the commands issued, during it
     yamcs_before = (link_count(args.ground), dt.datetime.now(dt.timezone.utc)) if args.ground else (0, None)
+    yamcs_frames, problem = yamcs_signs_frames(args) if args.ground else (None, "")
+    if problem:
+        print(f"error: taiji2 experiment: {problem}", file=sys.stderr)
+        return ExitStatus.BAD_INPUT
 
     try:
         attacks = attack_kinds(args.uplink_attack) if args.uplink_attack else []
@@ -421,6 +429,7 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
                             "-p", f"start_s:={start_s}", "-p", f"duration_s:={duration_s - start_s}",
                             # on Yamcs the planner issues commands and the station signs them
                             "-p", f"yamcs_url:={args.ground}" if args.ground else f"key_file:={key_file}",
+                            "-p", f"yamcs_stream:={yamcs_frames.stream if yamcs_frames else 'tc_realtime'}",
                             *[a for p in commander_maneuver for a in ("-p", p)]],
     }
     # the simulator exits (0) at the end of its data; every other node runs until stopped (what ends the run is
@@ -432,7 +441,8 @@ def run_link_experiment(args: argparse.Namespace, plan: Any, temporary: bool) ->
     if args.ground:
         commands["yamcs_station"] = ["run", "taiji2_ground_pkg", "yamcs_station", "--ros-args", "-r", "__ns:=/ground",
                                      "-p", f"station_port:={args.station_port}", "-p", f"yamcs_url:={args.ground}",
-                                     "-p", f"key_file:={key_file}"]
+                                     "-p", f"key_file:={key_file}",
+                                     "-p", f"frame_port:={yamcs_frames.port if yamcs_frames else 0}"]
     nodes = [NodeProcess.taiji2(name, argv) for name, argv in commands.items()]
     nodes.append(NodeProcess.taiji2("spacecraft_sim", [
         "run", "taiji2_sim_pkg", "spacecraft_sim", "--ros-args", "-r", "__ns:=/onboard", *onboard_remaps, *source,

@@ -41,6 +41,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             "(default 10015; experiment --ground finds it through the API)")
     serve.add_argument("--ready-timeout-s", type=float, default=180.0, metavar="S",
                        help="give up if the instance is not running after this long (default 180)")
+    serve.add_argument("--sdls-key-file", default="", metavar="KEYS",
+                       help="Yamcs signs the telecommands itself as SDLS-secured TC frames (its UdpTcFrameLink, "
+                            "AES-256-GCM authenticated encryption) with this key file's SPI, whose service must be "
+                            "authenticated_encryption (docs/security.md); experiment --ground then uplinks Yamcs's "
+                            "frames. Without it the ground station node signs")
+    serve.add_argument("--sdls-spi", type=int, default=-1, metavar="N",
+                       help="the SPI Yamcs signs with (default: the key file's highest active SPI)")
+    serve.add_argument("--frame-port", type=int, default=-1, metavar="PORT",
+                       help="where Yamcs sends its frames (UDP, 127.0.0.1; default the station port + 1, where "
+                            "experiment --ground listens)")
 
 
 def _check_output(out: Path, force: bool) -> str | None:
@@ -77,7 +87,11 @@ def _serve(args: argparse.Namespace) -> int:
     if data_dir.exists() and not data_dir.is_dir():
         print(f"error: taiji2 ground serve: --data-dir {data_dir}: not a directory", file=sys.stderr)
         return ExitStatus.BAD_INPUT
-    server = YamcsServer(data_dir, http_port=args.http_port, station_port=args.station_port)
+    frames, problem = _frame_link(args)
+    if problem:
+        print(f"error: taiji2 ground serve: {problem}", file=sys.stderr)
+        return ExitStatus.BAD_INPUT
+    server = YamcsServer(data_dir, http_port=args.http_port, station_port=args.station_port, frames=frames)
     stop = {"requested": False}
 
     def request_stop(signum: int, _frame: object) -> None:
@@ -92,6 +106,9 @@ def _serve(args: argparse.Namespace) -> int:
         waited = server.wait_ready(args.ready_timeout_s)
         print(f"ground: Yamcs ready in {waited:.1f} s; web interface http://127.0.0.1:{args.http_port}/, "
               f"ground station link on port {args.station_port}; Ctrl-C stops it", file=sys.stderr)
+        if frames is not None:
+            print(f"ground: Yamcs signs telecommands as SDLS frames (SPI {frames.spi}) sent to UDP port "
+                  f"{frames.port}", file=sys.stderr)
         print(f"ground: authentication on; credentials (mode 0600): operator {server.credentials_file('operator')}, "
               f"observer {server.credentials_file('observer')}; clients read them through YAMCS_CREDENTIALS_FILE",
               file=sys.stderr)
@@ -112,6 +129,29 @@ def _serve(args: argparse.Namespace) -> int:
         return ExitStatus.BAD_INPUT
     finally:
         server.stop()
+
+
+def _frame_link(args: argparse.Namespace) -> tuple[object | None, str]:
+    """Yamcs's own SDLS frame link of ``--sdls-key-file`` (None without it), or why not (one line)."""
+    if not args.sdls_key_file:
+        return None, ""
+    from taiji2_ground_pkg.mcs.yamcs_instance import SdlsFrameLink
+    from taiji2_runtime.packets.sdls_keys import ACTIVE, AUTHENTICATED_ENCRYPTION, KeyFileError, load_key_file
+
+    port = args.station_port + 1 if args.frame_port < 0 else args.frame_port
+    if not 1 <= port <= 65535:
+        return None, f"--frame-port {port}: not a UDP port (1-65535)"
+    try:
+        keys = load_key_file(args.sdls_key_file)
+        sa = keys.newest_active() if args.sdls_spi < 0 else keys.get(args.sdls_spi)
+    except (KeyFileError, ValueError) as exc:
+        return None, f"--sdls-key-file {exc}"
+    if sa is None or sa.state != ACTIVE:
+        return None, f"--sdls-spi {args.sdls_spi}: not an active SPI of {args.sdls_key_file}"
+    if sa.service != AUTHENTICATED_ENCRYPTION:
+        return None, (f"--sdls-key-file {args.sdls_key_file}: SPI {sa.spi} is of service {sa.service}; Yamcs signs "
+                      f"with {AUTHENTICATED_ENCRYPTION} only (set \"service\" of that key)")
+    return SdlsFrameLink(key=sa.key, spi=sa.spi, port=port), ""
 
 
 def _xtce(args: argparse.Namespace) -> int:

@@ -83,12 +83,14 @@ class YamcsCommander:
             stop.wait(poll_s)
         return False
 
-    def issue(self, packets: list[bytes], comments: list[str]) -> None:
-        """Issue each TC[11,4] of ``packets`` (in order) with its comment (shown in the command history)."""
+    def issue(self, packets: list[bytes], comments: list[str], stream: str = "tc_realtime") -> None:
+        """Issue each TC[11,4] of ``packets`` (in order) with its comment (shown in the command history) on the
+        command ``stream`` (``tc_realtime``: the ground-station link; ``tc_frames``: Yamcs's SDLS frame link)."""
         if self._connection is None:
             self._connection = self._processor.create_command_connection()
         for packet, comment in zip(packets, comments, strict=True):
-            command = self._connection.issue(COMMAND, args=insert_activities_arguments(packet), comment=comment)
+            command = self._connection.issue(COMMAND, args=insert_activities_arguments(packet), comment=comment,
+                                             stream=None if stream == "tc_realtime" else stream)
             with self._lock:
                 self._commands.append(command)
 

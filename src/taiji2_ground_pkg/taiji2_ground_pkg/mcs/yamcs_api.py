@@ -23,9 +23,23 @@ from urllib.parse import parse_qs, urlsplit
 
 from taiji2_ground_pkg.mcs.errors import GroundError
 
-__all__ = ["UNAUTHORIZED", "YamcsAddress", "archived_packets", "command_history", "connect", "credentials",
-           "instance_state", "is_yamcs_url", "link_counts", "parse_yamcs_url", "set_parameters",
-           "wait_for_link_count", "wait_for_verification"]
+__all__ = [
+    "UNAUTHORIZED",
+    "YamcsAddress",
+    "archived_packets",
+    "command_history",
+    "connect",
+    "credentials",
+    "frame_link_spis",
+    "instance_state",
+    "is_yamcs_url",
+    "link_counts",
+    "parse_yamcs_url",
+    "set_frame_sequence",
+    "set_parameters",
+    "wait_for_link_count",
+    "wait_for_verification",
+]
 
 _SCHEME = "yamcs"
 #: what :func:`instance_state` says when the server refuses the login (no or wrong credentials)
@@ -246,3 +260,38 @@ def wait_for_verification(url: str, since: dt.datetime, concluded: dict[str, int
         if now != history:
             history, still_since = now, time.monotonic()
     return history
+
+
+def frame_link_spis(url: str, link: str) -> list[int]:
+    """The SPIs of the instance's SDLS frame link ``link`` (empty if it has no such link)."""
+    from yamcs.protobuf.sdls import sdls_pb2
+
+    address = parse_yamcs_url(url)
+    try:
+        with _connected(address.server) as client:
+            response = client.ctx.get_proto(f"/sdls/{address.instance}/{link}")
+    except Exception as exc:
+        if type(exc).__name__ == "NotFound":
+            return []
+        raise GroundError(f"{url}: cannot read the SDLS link {link}: {type(exc).__name__}: {exc}") from exc
+    message = sdls_pb2.GetLinkSpisResponse()
+    message.ParseFromString(response.content)
+    return [int(spi) for spi in message.spis]
+
+
+def set_frame_sequence(url: str, link: str, spi: int, next_sequence: int) -> None:
+    """Set the IV counter Yamcs's frame link ``link`` signs its next frame of ``spi`` with (Yamcs keeps it across
+    restarts; a spacecraft whose counters restart, as the emulated one does each run, needs the ground to
+    start again above them)."""
+    from yamcs.protobuf.sdls import sdls_pb2
+
+    from taiji2_runtime.packets.sdls import IV_OCTETS
+
+    address = parse_yamcs_url(url)
+    body = sdls_pb2.SetSeqCtrRequestBody(seq=int(next_sequence).to_bytes(IV_OCTETS, "big"))
+    try:
+        with _connected(address.server) as client:
+            client.ctx.put_proto(f"/sdls/{address.instance}/{link}/{spi}/seq", data=body.SerializeToString())
+    except Exception as exc:
+        raise GroundError(f"{url}: cannot set the SDLS sequence of {link} SPI {spi}: {type(exc).__name__}: "
+                          f"{exc}") from exc

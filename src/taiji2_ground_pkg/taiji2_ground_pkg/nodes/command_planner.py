@@ -70,6 +70,9 @@ class CommandPlanner(rclpy.node.Node):
         yamcs_url = str(dp("yamcs_url", "", read_only(
             "issue the tables as commands of this Yamcs instance (yamcs://HOST:PORT/INSTANCE), whose ground "
             "station signs and uplinks them; empty: sign and send them here")).value)
+        yamcs_stream = str(dp("yamcs_stream", "tc_realtime", read_only(
+            "with yamcs_url: the command stream to issue on: tc_realtime (Yamcs sends packets, the station signs) "
+            "or tc_frames (Yamcs signs them as SDLS frames itself)")).value)
         maneuver = choose_maneuver(preset, asked or None, None).maneuver  # ValueError: one line naming the choice
         if start_s >= 0:
             maneuver.start_s = float(start_s)
@@ -97,7 +100,7 @@ class CommandPlanner(rclpy.node.Node):
         self._refused: dict[int, int] = {}
         self._rejected: dict[int, int] = {}
         self._lost: list[int] = []
-        self._yamcs = _YamcsCommanding(yamcs_url, self._packets, self.plan) if yamcs_url else None
+        self._yamcs = _YamcsCommanding(yamcs_url, yamcs_stream, self._packets, self.plan) if yamcs_url else None
         self.signer, self._key_problem = (None, "") if self._yamcs else self._signer(key_file, spi, first_sequence)
         self._frames = [self.signer.sign(p) for p in self._packets] if self.signer else []
         qos = lt.reliable_all()
@@ -186,7 +189,7 @@ class CommandPlanner(rclpy.node.Node):
 class _YamcsCommanding:
     """The tables issued to Yamcs from a thread of their own (the node's executor never waits on Yamcs)."""
 
-    def __init__(self, url: str, packets: list[bytes], plan: list[dict[str, Any]]) -> None:
+    def __init__(self, url: str, stream: str, packets: list[bytes], plan: list[dict[str, Any]]) -> None:
         from taiji2_ground_pkg.mcs.commanding import YamcsCommander
         from taiji2_ground_pkg.mcs.yamcs_instance import LINK_NAME
 
@@ -201,7 +204,7 @@ class _YamcsCommanding:
         def issue() -> None:
             try:
                 if self._commander.wait_for_link(LINK_NAME, stop=self._stop):
-                    self._commander.issue(packets, comments)
+                    self._commander.issue(packets, comments, stream)
                     self.problem = ""
             except Exception as exc:  # Yamcs refused or went away: said on /diagnostics, never a crash
                 self.problem = f"tables not issued to Yamcs {url}: {type(exc).__name__}: {exc}"

@@ -15,7 +15,10 @@ with Yamcs's sequence count and CRC) is matched to its table of the plan (``/gro
 digest of its application data), and once every planned table has come, they are signed as SDLS-secured TC
 Transfer Frames (in plan order, as the planner signs without Yamcs) and handed to the link
 (``/ground/link/tc``), each held until its pass as planned. A telecommand that is not in the plan (e.g. an
-operator's own) is counted and not uplinked: the link carries one plan per run.
+operator's own) is counted and not uplinked: the link carries one plan per run. Where Yamcs signs the
+telecommands itself (its SDLS frame link, ``taiji2 ground serve --sdls-key-file``; ``frame_port``), its frames
+come by UDP (:mod:`taiji2_ground_pkg.mcs.frame_receiver`), are opened with ``key_file`` only to read which
+table each carries, and go to the uplink as Yamcs made them.
 
 With ``yamcs_url`` set, it also sets the ground's parameters in Yamcs
 (:mod:`taiji2_ground_pkg.mcs.ground_parameters`):
@@ -35,6 +38,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from taiji2_ground_pkg.mcs.commanding import table_digest
+from taiji2_ground_pkg.mcs.frame_receiver import FrameReceiver
 from taiji2_ground_pkg.mcs.ground_parameters import estimate_values, reception_values
 from taiji2_ground_pkg.mcs.parameter_writer import ParameterWriter
 from taiji2_ground_pkg.mcs.station import StationFrontEnd
@@ -43,6 +47,7 @@ from taiji2_ground_pkg.uplink_signer import frame_signer
 from taiji2_runtime import link_topics as lt
 from taiji2_runtime.entry import run_node
 from taiji2_runtime.node_parameters import read_only
+from taiji2_runtime.packets.sdls_keys import KeyFileError, load_key_file
 from taiji2_runtime.ros import messages, rclpy
 
 REPORT_TOPIC = "/ground/yamcs_station"
@@ -62,13 +67,21 @@ class YamcsStation(rclpy.node.Node):
         spi = int(dp("spi", -1, read_only("SPI to sign with (-1: the key file's highest active SPI)")).value)
         first_sequence = int(dp("first_sequence", 1, read_only(
             "the first frame's SDLS sequence number (IV counter); above the last the spacecraft accepted")).value)
+        frame_port = int(dp("frame_port", 0, read_only(
+            "the UDP port where Yamcs's own SDLS frame link sends its signed frames (taiji2 ground serve "
+            "--sdls-key-file): they are uplinked as Yamcs made them, key_file only reads them; 0: Yamcs sends "
+            "packets on its ground-station link and this node signs them")).value)
         self._tc_lock = threading.Lock()
         self._from_yamcs: dict[str, bytes] = {}  # digest -> the first telecommand of that table Yamcs sent
+        self._yamcs_frames: dict[str, bytes] = {}  # digest -> Yamcs's own frame of that table (frame_port)
+        self._frames = None
         self._tc_repeats = 0
         self._plan: list[dict[str, Any]] | None = None
         self._uplinked = 0
         self._signer, self._key_problem = None, ""
-        if key_file:
+        if key_file and frame_port:
+            self._frames = self._frame_receiver(frame_port, key_file)
+        elif key_file:
             self._signer, self._key_problem, warning = frame_signer(key_file, spi, first_sequence)
             if self._key_problem:
                 self.get_logger().error(f"{self._key_problem} (the spacecraft refuses frames without a valid MAC)")
@@ -110,6 +123,26 @@ class YamcsStation(rclpy.node.Node):
                                  lambda m: writer.update(reception_values(json.loads(m.data))), lt.reliable_all())
         return writer
 
+    def _frame_receiver(self, port: int, key_file: str) -> FrameReceiver:
+        """Yamcs's frames on UDP ``port``, read with the key table of ``key_file`` (ValueError naming either)."""
+        try:
+            keys = load_key_file(key_file)
+        except KeyFileError as exc:
+            raise ValueError(f"key_file: {exc}") from None
+        try:
+            return FrameReceiver(port, keys, self._on_yamcs_frame)
+        except OSError as exc:
+            raise ValueError(f"frame_port {port}: cannot listen on 127.0.0.1 ({exc.strerror or exc})") from None
+
+    def _on_yamcs_frame(self, frame: bytes, packet: bytes) -> None:
+        """(The frame receiver's thread.) One of Yamcs's signed frames, kept under its table's digest."""
+        digest = table_digest(packet)
+        with self._tc_lock:
+            if digest in self._yamcs_frames:
+                self._tc_repeats += 1
+            else:
+                self._yamcs_frames[digest] = frame
+
     def _on_telecommand(self, packet: bytes) -> None:
         """(The station's reader thread.) One telecommand from Yamcs, kept under its table's digest."""
         digest = table_digest(packet)
@@ -124,19 +157,28 @@ class YamcsStation(rclpy.node.Node):
 
     def _uplink(self) -> None:
         """Once every planned table came from Yamcs: sign them in plan order and hand them to the link."""
-        if self._plan is None or self._signer is None or self._tc_pub.get_subscription_count() == 0:
+        if self._plan is None or self._tc_pub.get_subscription_count() == 0:
             return
-        with self._tc_lock:
-            packets = [self._from_yamcs.get(p["digest"]) for p in self._plan]
-        if any(p is None for p in packets):
-            return
-        frames = [self._signer.sign(p) for p in packets]
+        if self._frames is not None:  # Yamcs signed them
+            with self._tc_lock:
+                frames = [self._yamcs_frames.get(p["digest"]) for p in self._plan]
+            if any(f is None for f in frames):
+                return
+            signer = "Yamcs's SDLS frame link"
+        else:
+            if self._signer is None:
+                return
+            with self._tc_lock:
+                packets = [self._from_yamcs.get(p["digest"]) for p in self._plan]
+            if any(p is None for p in packets):
+                return
+            frames = [self._signer.sign(p) for p in packets]
+            signer = f"this node (SPI {self._signer.spi})"
         ready_ns = [round(p["ready_s"] * 1e9) for p in self._plan]
         self._tc_pub.publish(lt.burst(frames, ready_ns, lt.END_NS, end_of_data=True))
         self._uplinked = len(frames)
         self._uplink_timer.cancel()
-        self.get_logger().info(f"{len(frames)} telecommand(s) from Yamcs signed (SPI {self._signer.spi}) and "
-                               "handed to the uplink")
+        self.get_logger().info(f"{len(frames)} telecommand(s) from Yamcs, signed by {signer}, handed to the uplink")
 
     def _on_packets(self, msg: Any) -> None:
         packets = lt.split(msg)
@@ -150,12 +192,15 @@ class YamcsStation(rclpy.node.Node):
         """Packets received from the link, written to Yamcs, still queued; Yamcs's connections so far."""
         report = {"received": self._received, "sent": self._station.sent_packets, "queued": self._station.queued(),
                   "connections": self._station.connections, "end_of_data": self._end}
-        if self._signer is not None or self._key_problem:
+        if self._signer is not None or self._key_problem or self._frames is not None:
             with self._tc_lock:
                 matched = {p["digest"] for p in self._plan or []}
-                report.update(telecommands=self._station.telecommands, planned=len(self._plan or []),
-                              matched=len(matched & set(self._from_yamcs)),
-                              not_in_plan=len(set(self._from_yamcs) - matched) if self._plan is not None else None,
+                came = set(self._yamcs_frames if self._frames is not None else self._from_yamcs)
+                report.update(telecommands=self._frames.frames if self._frames else self._station.telecommands,
+                              planned=len(self._plan or []), matched=len(matched & came),
+                              signed_by="yamcs" if self._frames is not None else "station",
+                              frames_refused=dict(self._frames.refused) if self._frames else {},
+                              not_in_plan=len(came - matched) if self._plan is not None else None,
                               repeated=self._tc_repeats, uplinked=self._uplinked, key_problem=self._key_problem)
         if self._parameters is not None:
             report.update(parameter_pushes=self._parameters.pushes, parameter_failures=self._parameters.failures,
@@ -178,6 +223,8 @@ class YamcsStation(rclpy.node.Node):
             self._publish_report()  # the counts move on while the queue drains
 
     def destroy_node(self) -> None:
+        if self._frames is not None:
+            self._frames.close()
         if self._parameters is not None:
             self._parameters.close()
         self._station.close()
