@@ -293,9 +293,11 @@ def _proc_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _experiment(args: argparse.Namespace, out: Path, extra: list[str]) -> tuple[dict, float, float]:
-    """One graph run (no recording); ``(results, wall_s, cpu_s of the experiment and its nodes)``."""
-    env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "74"))
+def _experiment(args: argparse.Namespace, out: Path, extra: list[str],
+                environ: dict[str, str] | None = None) -> tuple[dict, float, float]:
+    """One graph run (no recording; ``environ`` added to the environment); ``(results, wall_s, cpu_s of the
+    experiment and its nodes)``."""
+    env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "74"), **(environ or {}))
     cmd = [sys.executable, "-m", "taiji2_apps.cli.main", "experiment", "--link", "deep_space", "--layout", "type1",
            "--duration-s", str(args.graph_duration_s), "--out", str(out), "--json", "--timeout-s", "20000", *extra]
     if args.maneuver:
@@ -329,7 +331,7 @@ def yamcs(args: argparse.Namespace) -> None:
         ready_s = server.wait_ready()
         jvm_before = _proc_cpu_s(server.process.pid)
         ground, wall_ground, cpu_ground = _experiment(args, out / "with", [
-            "--ground", server.url, "--station-port", str(server.station_port)])
+            "--ground", server.url, "--station-port", str(server.station_port)], server.operator_environ())
         jvm_s = _proc_cpu_s(server.process.pid) - jvm_before
     finally:
         server.stop()
