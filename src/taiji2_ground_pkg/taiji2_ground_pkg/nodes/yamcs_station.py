@@ -136,21 +136,20 @@ class YamcsStation(rclpy.node.Node):
 
     def _on_yamcs_frame(self, frame: bytes, packet: bytes) -> None:
         """(The frame receiver's thread.) One of Yamcs's signed frames, kept under its table's digest."""
-        digest = table_digest(packet)
-        with self._tc_lock:
-            if digest in self._yamcs_frames:
-                self._tc_repeats += 1
-            else:
-                self._yamcs_frames[digest] = frame
+        self._keep(self._yamcs_frames, packet, frame)
 
     def _on_telecommand(self, packet: bytes) -> None:
         """(The station's reader thread.) One telecommand from Yamcs, kept under its table's digest."""
+        self._keep(self._from_yamcs, packet, packet)
+
+    def _keep(self, store: dict[str, bytes], packet: bytes, item: bytes) -> None:
+        """``item`` under the digest of ``packet``'s table, the first one only (a repeat is counted)."""
         digest = table_digest(packet)
         with self._tc_lock:
-            if digest in self._from_yamcs:
+            if digest in store:
                 self._tc_repeats += 1
             else:
-                self._from_yamcs[digest] = packet
+                store[digest] = item
 
     def _on_plan(self, msg: Any) -> None:
         self._plan = json.loads(msg.data)
