@@ -64,3 +64,23 @@ def test_yamcs_signed_frames_are_verified_onboard(tmp_path):
     with pytest.raises(FrameRefused) as forged:
         other.verify(received[1])
     assert forged.value.reason == "bad_mac"
+
+
+def test_ground_serve_refuses_a_key_yamcs_cannot_sign_with_before_starting(tmp_path):
+    import subprocess
+
+    from taiji2_runtime.packets.sdls_keys import new_key_table, write_key_file
+
+    from support import PYTHON, python_subprocess_env
+
+    keys = write_key_file(tmp_path / "keys.json", new_key_table((1, 2), revoked=(2,)))  # the authentication service
+    for extra, problem in ((["--sdls-key-file", str(keys)], "SPI 1 is of service authentication"),
+                           (["--sdls-key-file", str(keys), "--sdls-spi", "2"], "--sdls-spi 2: not an active SPI"),
+                           (["--sdls-key-file", str(tmp_path / "none.json")], "--sdls-key-file key file"),
+                           (["--sdls-key-file", str(keys), "--frame-port", "70000"], "--frame-port 70000")):
+        done = subprocess.run([PYTHON, "-m", "taiji2_apps.cli.main", "ground", "serve", "--data-dir",
+                               str(tmp_path / "ground"), *extra], capture_output=True, text=True, timeout=120,
+                              env=python_subprocess_env())
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 2 and len(lines) == 1 and problem in lines[0], done.stderr
+    assert not (tmp_path / "ground").exists()  # nothing started, nothing written

@@ -157,6 +157,8 @@ class CommandPlanner(rclpy.node.Node):
         yamcs = self._yamcs.summary() if self._yamcs else {}
         if yamcs.get("problem"):
             problems.append(yamcs["problem"])
+        elif yamcs.get("waiting_for_link"):
+            problems.append("waiting for Yamcs's ground-station link to issue the tables")
         if yamcs.get("failed"):
             problems.append("failed in Yamcs: " + "; ".join(f"#{k}: {m}" for k, m in yamcs["failed"].items()))
         if self._rejected:
@@ -195,7 +197,8 @@ class _YamcsCommanding:
 
         self._plan = plan
         self._stop = threading.Event()
-        self.problem = "waiting for Yamcs's ground-station link"
+        self.problem = ""  # why the tables could not be issued (an error)
+        self.waiting = True  # until Yamcs's link is connected and the tables are issued (a warning meanwhile)
         self._commander = YamcsCommander(url)  # GroundError (a ValueError) naming a bad address
         comments = [f"table #{p['tc_seq']} of pass {p['pass']}: {p['activities']} activities released "
                     f"{p['first_release_s']:g}-{p['last_release_s']:g} s, uplinked from ground time {p['ready_s']:g} s"
@@ -205,9 +208,10 @@ class _YamcsCommanding:
             try:
                 if self._commander.wait_for_link(LINK_NAME, stop=self._stop):
                     self._commander.issue(packets, comments, stream)
-                    self.problem = ""
             except Exception as exc:  # Yamcs refused or went away: said on /diagnostics, never a crash
                 self.problem = f"tables not issued to Yamcs {url}: {type(exc).__name__}: {exc}"
+            finally:
+                self.waiting = False
 
         self._thread = threading.Thread(target=issue, name="command-planner-yamcs", daemon=True)
         self._thread.start()
@@ -227,7 +231,7 @@ class _YamcsCommanding:
         return {"issued": len(history), **{s: sum(h[s] == "OK" for h in history) for s in stages},
                 "failed": {k: h["message"] or "failed" for k, h in enumerate(history)
                            if "NOK" in (h[s] for s in stages) or "TIMEOUT" in (h[s] for s in stages)},
-                "problem": self.problem}
+                "problem": self.problem, "waiting_for_link": self.waiting}
 
     def close(self) -> None:
         self._stop.set()
