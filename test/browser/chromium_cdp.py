@@ -18,6 +18,9 @@ import websocket
 
 __all__ = ["Browser", "chromium_path"]
 
+#: what the DevTools protocol answers when the page navigated while a call ran in it
+_NAVIGATED = "Inspected target navigated or closed"
+
 
 def chromium_path() -> str | None:
     """Debian's Chromium, if installed."""
@@ -61,14 +64,20 @@ class Browser:
     def navigate(self, url: str) -> None:
         self.call("Page.navigate", url=url)
 
-    def evaluate(self, expression: str) -> Any:
-        """The value of a JavaScript expression in the page."""
-        return self.call("Runtime.evaluate", expression=expression, returnByValue=True)["result"].get("value")
+    def evaluate(self, expression: str, **options: Any) -> Any:
+        """The value of a JavaScript expression in the page; None if the page navigated away meanwhile (a
+        redirect, e.g. after signing in: the caller asks again)."""
+        try:
+            result = self.call("Runtime.evaluate", expression=expression, returnByValue=True, **options)
+        except RuntimeError as exc:
+            if _NAVIGATED in str(exc):
+                return None
+            raise
+        return result.get("result", {}).get("value")
 
     def pause(self, seconds: float) -> None:
         """Let the page run for ``seconds`` (a timer inside the page, awaited)."""
-        self.call("Runtime.evaluate", expression=f"new Promise(r => setTimeout(r, {1000 * seconds:.0f}))",
-                  awaitPromise=True)
+        self.evaluate(f"new Promise(r => setTimeout(r, {1000 * seconds:.0f}))", awaitPromise=True)
 
     def text(self) -> str:
         """What the page shows (``document.body.innerText``)."""

@@ -112,12 +112,22 @@ def credentials(environ: Mapping[str, str] | None = None) -> tuple[str, str] | N
     return values["YAMCS_USER"], values["YAMCS_PASSWORD"]
 
 
-def connect(server: str, environ: Mapping[str, str] | None = None) -> Any:
-    """A ``yamcs.client.YamcsClient`` of ``server`` (``HOST:PORT``), logged in with :func:`credentials`."""
+def connect(server: str, environ: Mapping[str, str] | None = None, *, attempts: int = 5) -> Any:
+    """A ``yamcs.client.YamcsClient`` of ``server`` (``HOST:PORT``), logged in with :func:`credentials`. Yamcs
+    answers 429 to more than 5 logins a second from one address (its guard against guessing passwords): the
+    login is tried again a second later, up to ``attempts`` times."""
     from yamcs.client import Credentials, YamcsClient
 
     login = credentials(environ)
-    return YamcsClient(server, credentials=Credentials(username=login[0], password=login[1]) if login else None)
+    for attempt in range(attempts):
+        try:
+            return YamcsClient(server, credentials=Credentials(username=login[0], password=login[1])
+                               if login else None)
+        except Exception as exc:
+            if "429" not in str(exc) or attempt == attempts - 1:
+                raise
+            time.sleep(1.0 + 0.1 * attempt)
+    raise AssertionError("unreachable")
 
 
 #: logged-in clients by (server, login, thread): Yamcs refuses more than 5 logins a second from one address (429,
@@ -140,10 +150,13 @@ def _connected(server: str, environ: Mapping[str, str] | None = None) -> Iterato
             _CLIENTS[key] = client
     try:
         yield client
-    except BaseException:
-        with _CLIENTS_LOCK:
-            _CLIENTS.pop(key, None)
-        client.close()
+    except BaseException as exc:
+        # a session the server no longer takes, or a server gone: the next call logs in again (a refusal of
+        # one request, e.g. 403, keeps the session: logging in again would only count against the 429 guard)
+        if type(exc).__name__ in ("Unauthorized", "ConnectionFailure") or isinstance(exc, OSError):
+            with _CLIENTS_LOCK:
+                _CLIENTS.pop(key, None)
+            client.close()
         raise
 
 
