@@ -72,9 +72,11 @@ def test_a_clean_run_stops_every_node_the_recorder_last_and_prints_progress(tmp_
     order = tmp_path / "order.txt"
     nodes = [_node("worker", UNTIL_STOPPED, str(order), "worker"), _node("sim", SIMULATOR, ends=True),
              _node("recorder", UNTIL_STOPPED, str(order), "recorder", stop_last=True)]
-    graph = Graph(nodes, tmp_path, done=lambda: _simulated_s(tmp_path) >= 5 and "ready" in _log(tmp_path, "worker")
-                  and "ready" in _log(tmp_path, "recorder"),
-                  progress=lambda: Progress(_simulated_s(tmp_path), 5.0, "fake"), timeout_s=120.0,
+    polled = []  # the run is done only after it has been polled once (a busy machine may finish the fake simulator
+    # before the first poll, and a run done at its first poll prints no progress line)
+    graph = Graph(nodes, tmp_path, done=lambda: bool(polled) and _simulated_s(tmp_path) >= 5
+                  and "ready" in _log(tmp_path, "worker") and "ready" in _log(tmp_path, "recorder"),
+                  progress=lambda: polled.append(1) or Progress(_simulated_s(tmp_path), 5.0, "fake"), timeout_s=120.0,
                   poll_s=0.01, progress_period_s=0.0)
     result = run_graph(graph)
     assert result.ok and result.failure is None and result.stop_problems == ()
