@@ -41,7 +41,7 @@ from taiji2_runtime.packets.sdls import (
     FrameSigner,
     encode_frame_security_report,
 )
-from taiji2_runtime.packets.sdls_keys import KeyTable, new_key_table
+from taiji2_runtime.packets.sdls_keys import KeyTable, SecurityAssociation, new_key_table
 from taiji2_runtime.packets.tc_frame import FECF_OCTETS, FrameError, frame_crc, split_frames
 from taiji2_runtime.packets.telecommand import encode_torque_tc
 from taiji2_runtime.packets.walk import walk_packets
@@ -118,8 +118,10 @@ def report_corpus() -> list[bytes]:
 
 
 def uplink_keys() -> KeyTable:
-    """The onboard key table of the uplink corpus: SPI 1 and 2, both active."""
-    return new_key_table((1, 2))
+    """The onboard key table of the uplink corpus: SPI 1 (authenticated encryption, as Yamcs signs) and SPI 2
+    (authentication), both active, so that both SDLS services are fuzzed."""
+    fresh = new_key_table((1, 2))
+    return KeyTable([SecurityAssociation(1, fresh.get(1).key, service="authenticated_encryption"), fresh.get(2)])
 
 
 def table(seq: int, first_s: float = 2_000.0, n: int = 3) -> bytes:
