@@ -17,8 +17,6 @@ from typing import Any
 __all__ = ["YamcsFrames", "format_ground", "ground_problem", "ground_summary", "link_count", "publish_verdict",
            "yamcs_signs_frames"]
 
-_STAGES = ("Queued", "Released", "Sent", "Acceptance", "Execution")
-
 
 def ground_problem(url: str, station_port: int) -> str | None:
     """Why the run cannot feed ``url`` (a bad address, no running instance, a bad port); None if it can."""
@@ -101,6 +99,7 @@ def ground_summary(url: str, station: dict[str, Any] | None, count_before: int, 
     link's count still moves toward what was sent); with ``started`` (the run's UTC start), the command
     history of the tables issued since, once Yamcs has verified each stage for which the ground received a
     report (``reported``: stage -> tables), or its verification has stopped moving."""
+    from taiji2_ground_pkg.mcs.commanding import stage_counts
     from taiji2_ground_pkg.mcs.yamcs_api import wait_for_link_count, wait_for_verification
 
     sent = int((station or {}).get("sent", 0))
@@ -108,10 +107,7 @@ def ground_summary(url: str, station: dict[str, Any] | None, count_before: int, 
     out: dict[str, Any] = {"url": url, "station": station, "sent": sent, "read_by_yamcs": read}
     if started is not None:
         history = wait_for_verification(url, started, reported or {})
-        out["commands"] = {"issued": len(history), **{s: sum(h[s] == "OK" for h in history) for s in _STAGES},
-                           "failed": [{"seq_count": h["seq_count"], "message": h["message"]} for h in history
-                                      if any(h[s] in ("NOK", "TIMEOUT") for s in _STAGES)],
-                           "history": history}
+        out["commands"] = {**stage_counts(history), "history": history}
     return out
 
 
@@ -131,12 +127,14 @@ def publish_verdict(url: str, met: int, total: int) -> dict[str, Any]:
 
 
 def format_ground(ground: dict[str, Any]) -> str:
+    from taiji2_ground_pkg.mcs.xtce import COMMAND_STAGES
+
     station = ground.get("station") or {}
     line = (f"Yamcs ({ground['url']}): the ground received {station.get('received', 0)} packets, sent "
             f"{ground['sent']} to Yamcs; its link read {ground['read_by_yamcs']}")
     commands = ground.get("commands")
     if commands:
         line += (f"\n  commanded through Yamcs: {commands['issued']} table(s) issued; "
-                 + ", ".join(f"{s} {commands[s]}" for s in _STAGES)
+                 + ", ".join(f"{s} {commands[s]}" for s in COMMAND_STAGES)
                  + "".join(f"\n  table (count {f['seq_count']}) failed: {f['message']}" for f in commands["failed"]))
     return line

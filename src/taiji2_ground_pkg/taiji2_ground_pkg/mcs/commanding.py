@@ -17,16 +17,19 @@ import threading
 from typing import Any
 
 from taiji2_ground_pkg.mcs.errors import GroundError
-from taiji2_ground_pkg.mcs.xtce import SYSTEM_NAME, VERIFIER_STAGES
+from taiji2_ground_pkg.mcs.xtce import COMMAND_STAGES, SYSTEM_NAME, VERIFIER_STAGES
 from taiji2_runtime.packets.definition import TC_APID
 
-__all__ = ["COMMAND", "YamcsCommander", "application_data", "insert_activities_arguments", "table_digest"]
+__all__ = ["COMMAND", "YamcsCommander", "application_data", "insert_activities_arguments", "stage_counts",
+           "table_digest"]
 
 #: the MetaCommand the tables are issued as
 COMMAND = f"/{SYSTEM_NAME}/insert_activities"
 _PRIMARY, _SECONDARY, _CRC = 6, 5, 2  # CCSDS primary header, PUS-C TC secondary header, CRC [octets]
 _CUC_OCTETS = 8  # an activity's release time: P-field, 4 coarse, 3 fine
-_STAGES = ("Queued", "Released", "Sent")
+_VERIFIED = {name for name, _ in VERIFIER_STAGES}
+#: the command history's acknowledgment names: Yamcs's stages, then the verifiers'
+_ACK_PREFIX = {False: "Acknowledge_", True: "Verifier_"}
 
 
 def application_data(packet: bytes) -> bytes:
@@ -105,11 +108,8 @@ class YamcsCommander:
             attributes = dict(command.attributes)
             acks = dict(command.acknowledgments)
             entry: dict[str, Any] = {"id": command.id, "seq_count": attributes.get("ccsds-seqcount")}
-            for stage in _STAGES:
-                ack = acks.get(f"Acknowledge_{stage}")
-                entry[stage] = getattr(ack, "status", None)
-            for stage, _subtype in VERIFIER_STAGES:
-                ack = acks.get(f"Verifier_{stage}")
+            for stage in COMMAND_STAGES:
+                ack = acks.get(f"{_ACK_PREFIX[stage in _VERIFIED]}{stage}")
                 entry[stage] = getattr(ack, "status", None)
             entry["message"] = next((a.message for a in acks.values() if getattr(a, "message", None)), None)
             out.append(entry)
@@ -121,12 +121,9 @@ class YamcsCommander:
         self._client.close()
 
 
-def wait_until(condition: Any, stop: threading.Event, poll_s: float = 0.2) -> bool:
-    """Poll ``condition()`` until true or ``stop`` is set."""
-    while not stop.is_set():
-        if condition():
-            return True
-        stop.wait(poll_s)
-    return False
-
-
+def stage_counts(history: list[dict[str, Any]]) -> dict[str, Any]:
+    """Of a command history (:meth:`YamcsCommander.history` or ``yamcs_api.command_history``): the commands,
+    per stage those that passed it (OK), and the failed ones (a stage NOK or timed out) with Yamcs's message."""
+    return {"issued": len(history), **{s: sum(h[s] == "OK" for h in history) for s in COMMAND_STAGES},
+            "failed": [{"seq_count": h["seq_count"], "message": h["message"] or "failed"} for h in history
+                       if any(h[s] in ("NOK", "TIMEOUT") for s in COMMAND_STAGES)]}

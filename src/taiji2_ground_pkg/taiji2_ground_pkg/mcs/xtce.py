@@ -72,9 +72,21 @@ from taiji2_ground_pkg.mcs.ground_parameters import add_ground_parameters
 from taiji2_runtime.packets import definition as d
 from taiji2_runtime.packets import scheduling, telecommand
 
-__all__ = ["CRC_PARAMETER", "FAILURE_LABELS", "PRIMARY_HEADER", "REPORT_CONTAINERS", "ROOT_CONTAINER", "SYSTEM_NAME",
-           "VERIFICATION_WINDOW_S", "VERIFIER_STAGES",
-           "build_system", "parameter_name", "write_xtce", "xtce_document"]
+__all__ = [
+    "COMMAND_STAGES",
+    "CRC_PARAMETER",
+    "FAILURE_LABELS",
+    "PRIMARY_HEADER",
+    "REPORT_CONTAINERS",
+    "ROOT_CONTAINER",
+    "SYSTEM_NAME",
+    "VERIFICATION_WINDOW_S",
+    "VERIFIER_STAGES",
+    "build_system",
+    "parameter_name",
+    "write_xtce",
+    "xtce_document",
+]
 
 SYSTEM_NAME = "taiji2"
 ROOT_CONTAINER = "ccsds_space_packet"
@@ -89,6 +101,8 @@ REPORT_CONTAINERS = {1: "tm_1_1_acceptance_success", 2: "tm_1_2_acceptance_failu
 #: the command history stages of a TC[11,4], from the onboard reports (Yamcs ``Pus1Verifier``): name, the PUS
 #: stage (its success subtype; the failure is the next one)
 VERIFIER_STAGES = (("Acceptance", 1), ("Execution", 7))
+#: every stage of a table's command history, in order: Yamcs's own (queue, link), then the verifiers'
+COMMAND_STAGES = ("Queued", "Released", "Sent", *(name for name, _ in VERIFIER_STAGES))
 #: how long after its release Yamcs waits for a stage [s]: the planner releases a run's tables at its start and
 #: the ground station holds each until its pass, so a table's reports come up to a run's length later
 VERIFICATION_WINDOW_S = 2 * 86400.0

@@ -239,11 +239,11 @@ def command_history(url: str, since: dt.datetime, command: str = "insert_activit
     """The archived history of the ``command`` commands issued at or after ``since`` (UTC), oldest first: the
     CCSDS ``seq_count`` Yamcs gave each, every stage's status (``Queued`` ... ``Acceptance``, ``Execution``:
     OK, NOK, PENDING, TIMEOUT, or None), the failure ``message`` and the operator's ``comment``."""
-    from taiji2_ground_pkg.mcs.xtce import SYSTEM_NAME, VERIFIER_STAGES
+    from taiji2_ground_pkg.mcs.xtce import COMMAND_STAGES, SYSTEM_NAME, VERIFIER_STAGES
 
     address = parse_yamcs_url(url)
-    stages = {**{f"Acknowledge_{s}": s for s in ("Queued", "Released", "Sent")},
-              **{f"Verifier_{s}": s for s, _ in VERIFIER_STAGES}}
+    verified = {s for s, _ in VERIFIER_STAGES}
+    stages = {f"{'Verifier' if s in verified else 'Acknowledge'}_{s}": s for s in COMMAND_STAGES}
     out = []
     with _connected(address.server) as client:
         archive = client.get_archive(address.instance)

@@ -32,7 +32,7 @@ import threading
 from collections.abc import Sequence
 from typing import Any
 
-from taiji2_ground_pkg.mcs.commanding import table_digest
+from taiji2_ground_pkg.mcs.commanding import stage_counts, table_digest
 from taiji2_ground_pkg.uplink_plan import maneuver_activities, plan_uplinks
 from taiji2_ground_pkg.uplink_signer import frame_signer
 from taiji2_model.maneuver_choice import MANEUVER_HELP, choose_maneuver
@@ -160,7 +160,8 @@ class CommandPlanner(rclpy.node.Node):
         elif yamcs.get("waiting_for_link"):
             problems.append("waiting for Yamcs's ground-station link to issue the tables")
         if yamcs.get("failed"):
-            problems.append("failed in Yamcs: " + "; ".join(f"#{k}: {m}" for k, m in yamcs["failed"].items()))
+            problems.append("failed in Yamcs: " + "; ".join(f"count {f['seq_count']}: {f['message']}"
+                                                             for f in yamcs["failed"]))
         if self._rejected:
             problems.append(f"telecommands refused at acceptance (TM[1,2]): #{', #'.join(map(str, self._rejected))}")
         if self._lost:
@@ -226,12 +227,7 @@ class _YamcsCommanding:
 
     def summary(self) -> dict[str, Any]:
         """Tables issued, per stage the count passed, the failed ones with Yamcs's reason, the problem if any."""
-        history = self._commander.history()
-        stages = ("Queued", "Released", "Sent", "Acceptance", "Execution")
-        return {"issued": len(history), **{s: sum(h[s] == "OK" for h in history) for s in stages},
-                "failed": {k: h["message"] or "failed" for k, h in enumerate(history)
-                           if "NOK" in (h[s] for s in stages) or "TIMEOUT" in (h[s] for s in stages)},
-                "problem": self.problem, "waiting_for_link": self.waiting}
+        return {**stage_counts(self._commander.history()), "problem": self.problem, "waiting_for_link": self.waiting}
 
     def close(self) -> None:
         self._stop.set()
