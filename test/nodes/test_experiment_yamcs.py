@@ -105,7 +105,9 @@ def test_a_link_run_feeds_yamcs_and_its_archive_calibrates_as_the_ground_recordi
     assert diagnoses[0]["status"] == diagnoses[1]["status"]
     # the live estimates are Yamcs parameters: the final ones, to the bit, each sigma checked against its
     # requirement by Yamcs's alarm (WARNING above it)
-    assert ground["station"]["parameter_pushes"] > 0 and ground["station"]["parameter_failures"] == 0, ground
+    # (the station's report is its last before shutdown: how many pushes it counts by then depends on the wall
+    # time the run took; its writer pushes what is left as it closes, so the values below are the check)
+    assert ground["station"]["parameter_failures"] == 0, ground
     values = _parameters(yamcs.url)
     for g in (1, 2):
         final = results[f"grs{g}"]
@@ -121,6 +123,11 @@ def test_a_link_run_feeds_yamcs_and_its_archive_calibrates_as_the_ground_recordi
             assert sigma[0] == pytest.approx(np.sqrt(final["com_offset_cov"][i][i]), rel=1e-12)
             assert sigma[1] == ("WARNING" if sigma[0] > COM_OFFSET_REQUIREMENT_M else "IN_LIMITS"), (g, axis, sigma)
     assert values["ground_missing_fraction"] == (0.0, "IN_LIMITS")  # this link loses nothing
+    # and each stream's link statistics: the ground's final counts
+    for name, counts in results["link"]["ground"].items():
+        assert values[f"link_{name}_missing_fraction"] == (0.0, "IN_LIMITS"), name
+        for k in ("received", "duplicate", "out_of_order", "missing", "held"):
+            assert values[f"link_{name}_{k}"][0] == counts[k], (name, k, counts)
     # the verdict's requirement status (the run's one verdict evaluation), with its alarm
     verdict = results["verdict"]
     met = len(verdict["met"]) + bool((verdict["range"] or {}).get("met"))

@@ -42,11 +42,11 @@ def test_planned_tables_flown_on_time_and_late_table_refused(context, executor, 
     for n in (planner, link, onboard, probe):
         executor.add_node(n)
     qos = lt.reliable_all()
-    commands, reports = {}, []
+    commands, reports, sent = {}, [], []
     probe.create_subscription(messages.geometry_msgs.WrenchStamped, "/onboard/taiji2/maneuver/command",
                               lambda m: commands.__setitem__(lt.stamp_ns(m.header), m.wrench.torque.z), qos)
     probe.create_subscription(messages.taiji2_msgs.SpacePackets, "/onboard/link/tm_reports",
-                              lambda m: reports.extend(decode_report(p) for p in lt.split(m)), qos)
+                              lambda m: sent.extend(zip(lt.split(m), m.times_ns, strict=True)), qos)
     clock = probe.create_publisher(messages.rosgraph_msgs.Clock, "/clock", 10)
     assert spin_until(executor, lambda: onboard._horizon_ns > 0, timeout_s=20.0)  # the plan is onboard
     for t in range(0, 331):
@@ -66,6 +66,12 @@ def test_planned_tables_flown_on_time_and_late_table_refused(context, executor, 
     assert bad.size == 0, (t[bad][:10], flown[bad][:10], truth[bad][:10])
     assert np.all(flown[table_1] == 0.0)  # refused as late (never executed), the maneuver stopped safely
     assert np.any(truth[table_1] != 0.0)
+    # each report twice, the same packet report_repeat_s (10 s) later: the ground keeps one
+    first = {}
+    for packet, t_ns in sent:
+        first.setdefault(packet, []).append(t_ns)
+    assert all(len(ts) == 2 and ts[1] - ts[0] == 10 * 10**9 for ts in first.values()), first.values()
+    reports = [decode_report(p) for p in first]
     late = [r for r in reports if r.subtype == 8]
     assert late and late[0].failure_code == FAILURE_LATE and abs(late[0].onboard_ns / 1e9 - arrival_1) < 1.0
     assert onboard.schedule.refused_late > 0 and sum(r.subtype == 1 for r in reports) == len(planner.plan)

@@ -54,7 +54,8 @@ def _refit(frame: bytes | bytearray) -> bytes:
 
 
 def _packets(onboard):
-    return [p for _, p in onboard._reports]
+    """The distinct report packets queued (each verification report is queued twice: report_repeat_s)."""
+    return list(dict.fromkeys(p for _, p in onboard._reports))
 
 
 def _diagnostics(onboard):
@@ -117,7 +118,7 @@ def test_each_refusal_reason_refused_counted_and_nothing_scheduled(context, keys
         signer = FrameSigner(ground, 2)
         genuine = signer.sign(_table(0))
         _deliver(onboard, [genuine])
-        inserted, reports = onboard.schedule.inserted, len(onboard._reports)
+        inserted, reports = onboard.schedule.inserted, len(_packets(onboard))
         frame = _attacks(ground, genuine)[attack]
         # truncated/oversized frames alone in a burst: the burst's octets do not divide into frames (truncated),
         # or divide into a frame and a stray remainder; either way nothing of it is read

@@ -12,8 +12,10 @@ Alarms (XTCE static alarm ranges, checked by Yamcs on every value):
   (:data:`~taiji2_estimator_pkg.report.SCALE_FACTOR_REQUIREMENT_REL`);
 * ``grs{g}_d_{axis}_sigma`` [m]: WARNING above the requirement, 100 um
   (:data:`~taiji2_estimator_pkg.report.COM_OFFSET_REQUIREMENT_M`);
-* ``ground_missing_fraction`` (samples declared lost / expected, all streams): WARNING above 1 %, CRITICAL
-  above 10 % (the deep-space link loses about 2 %: a warning an operator looks at, not a failure);
+* ``ground_missing_fraction`` (samples declared lost / expected, all streams) and, per stream,
+  ``link_{stream}_missing_fraction``: WARNING above 1 %, CRITICAL above 10 % (the deep-space link loses
+  about 2 %: a warning an operator looks at, not a failure); each stream's duplicates, packets out of
+  order and held (waiting for a gap to close) are counts without alarm;
 * ``verdict_requirements_not_met``: the requirements the run's verdict finds not met (the one verdict
   evaluation of ``taiji2 experiment``, set once at the end of a run: :func:`verdict_values`): WARNING above 0.
 """
@@ -28,6 +30,7 @@ from typing import Any
 from yamcs.pymdb import DataSource, FloatEncoding, FloatParameter, System, ThresholdAlarm
 
 from taiji2_estimator_pkg.report import COM_OFFSET_REQUIREMENT_M, SCALE_FACTOR_REQUIREMENT_REL
+from taiji2_runtime.packets.definition import STREAMS
 
 __all__ = ["MISSING_CRITICAL", "MISSING_WARNING", "ParameterSpec", "add_ground_parameters", "estimate_values",
            "parameter_specs", "reception_values", "verdict_values"]
@@ -37,6 +40,12 @@ MISSING_WARNING = 0.01
 MISSING_CRITICAL = 0.10
 _G_AXES = ("Pphi", "Ptheta", "Ppsi")
 _D_AXES = ("x", "y", "z")
+_STREAM_NAMES = frozenset(s.name for s in STREAMS)
+#: the per-stream counts of the ground reception that are parameters (reception.GroundReception.counts)
+_STREAM_COUNTS = {"received": "packets received (duplicates included)",
+                  "duplicate": "packets received twice (the first kept)",
+                  "out_of_order": "packets that arrived after a later count",
+                  "missing": "samples declared lost", "held": "packets held, waiting for a gap to close"}
 
 
 @dataclass(frozen=True)
@@ -70,6 +79,12 @@ def parameter_specs() -> tuple[ParameterSpec, ...]:
     specs.append(ParameterSpec("ground_missing_fraction", None,
                                "samples the ground declared lost / samples expected, all streams",
                                warning_high=MISSING_WARNING, critical_high=MISSING_CRITICAL))
+    for stream in STREAMS:
+        specs.append(ParameterSpec(f"link_{stream.name}_missing_fraction", None,
+                                   f"{stream.name}: samples declared lost / samples expected",
+                                   warning_high=MISSING_WARNING, critical_high=MISSING_CRITICAL))
+        for count, meaning in _STREAM_COUNTS.items():
+            specs.append(ParameterSpec(f"link_{stream.name}_{count}", None, f"{stream.name}: {meaning}"))
     specs.append(ParameterSpec("ground_released_through_s", "s",
                                "onboard time through which the ground has released every stream"))
     specs.append(ParameterSpec("ground_time_s", "s", "the ground station's time at its last reception"))
@@ -126,6 +141,12 @@ def reception_values(record: Mapping[str, Any]) -> dict[str, float]:
     values = {"ground_missing_fraction": missing / expected if expected else math.nan,
               "ground_released_through_s": min(through) if through else math.nan,
               "ground_time_s": float(record.get("ground_time_s") or math.nan)}
+    for name, c in counts.items():
+        if name not in _STREAM_NAMES:
+            continue  # not a parameter of the database
+        lost, stream_expected = int(c.get("missing", 0)), int(c.get("missing", 0)) + int(c.get("released", 0))
+        values[f"link_{name}_missing_fraction"] = lost / stream_expected if stream_expected else math.nan
+        values.update({f"link_{name}_{k}": float(c.get(k, 0)) for k in _STREAM_COUNTS})
     return _finite(values)
 
 

@@ -11,7 +11,10 @@ valid ``TC[11,4]`` inserts its activities into :class:`taiji2_sim_pkg.core.onboa
 at its arrival, which refuses an activity due before arrival + time margin (late: never executed late)
 or beyond the capacity; acceptance ``TM[1,1]`` and completion ``TM[1,7]`` / ``TM[1,8]`` (refused
 activities counted, code late or capacity) are reported in telemetry (``/onboard/link/tm_reports``,
-taken by the telemetry packetizer; APID 0x141). Releases each activity at its onboard time: on the
+taken by the telemetry packetizer; APID 0x141). Each verification report is sent twice, the same packet
+again ``report_repeat_s`` later: the downlink loses packets (in bursts), and a table whose reports are
+all lost would stay unverified on the ground; the ground keeps the first copy (same sequence count and
+time, a duplicate). Releases each activity at its onboard time: on the
 onboard bus ``/onboard/taiji2/maneuver/command`` it publishes, at every tick of ``publish_rate_hz``
 up to ``lookahead_s`` ahead of the clock (time-tagged, as maneuver_commander, so the accelerated
 simulator runs in lock-step), the torque of the last activity released at or before each stamp, but
@@ -72,6 +75,11 @@ class OnboardExecutor(rclpy.node.Node):
         window = dp("replay_window", DEFAULT_REPLAY_WINDOW, read_only(
             "anti-replay window: a frame's sequence number at most this far above the last accepted")).value
         max_frame = dp("max_frame_octets", MAX_FRAME_OCTETS, read_only("longest TC frame accepted [octets]")).value
+        repeat_s = dp("report_repeat_s", 10.0, read_only(
+            "send each verification report again this much later, the same packet [s]; 0: once")).value
+        if repeat_s < 0:
+            raise ValueError(f"parameter report_repeat_s = {repeat_s}: must be >= 0 s")
+        self._repeat_ns = round(_NS * repeat_s)
         self.verifier = FrameVerifier(self._key_table(key_file), window=window, max_frame_octets=max_frame)
         self.schedule = OnboardSchedule(capacity, margin)
         self._horizon_ns = -1  # the uplink is complete through this onboard time
@@ -138,25 +146,31 @@ class OnboardExecutor(rclpy.node.Node):
             tc, commands = decode_insert_activities(packet)
         except PacketError as exc:
             self._invalid += 1
-            self._report(encode_report(2, packet, arrival_ns, self._report_seq,
-                                       ACCEPTANCE_FAILURE_CODES.get(exc.kind, 0)), arrival_ns)
+            self._verification(encode_report(2, packet, arrival_ns, self._report_seq,
+                                             ACCEPTANCE_FAILURE_CODES.get(exc.kind, 0)), arrival_ns)
             self.get_logger().warn(f"telecommand refused at acceptance (TM[1,2]): {exc}")
             return
         late, full = self.schedule.insert(arrival_ns / _NS, [(c.execute_onboard_ns / _NS, tuple(c.torque_n_m))
                                                              for c in commands])
         self._tables += 1
-        self._report(encode_report(1, tc, arrival_ns, self._report_seq), arrival_ns)
+        self._verification(encode_report(1, tc, arrival_ns, self._report_seq), arrival_ns)
         if late or full:
             code = FAILURE_LATE if late else FAILURE_CAPACITY
-            self._report(encode_report(8, tc, arrival_ns, self._report_seq, code, late + full), arrival_ns)
+            self._verification(encode_report(8, tc, arrival_ns, self._report_seq, code, late + full), arrival_ns)
             self.get_logger().warn(f"TC[11,4] #{tc.seq_count} arriving at {arrival_ns / _NS:.1f} s: {late} "
                                    f"activities refused as late, {full} for capacity (never executed)")
         else:
-            self._report(encode_report(7, tc, arrival_ns, self._report_seq), arrival_ns)
+            self._verification(encode_report(7, tc, arrival_ns, self._report_seq), arrival_ns)
 
     def _report(self, packet: bytes, t_ns: int) -> None:
         self._reports.append((t_ns, packet))
         self._report_seq += 1
+
+    def _verification(self, packet: bytes, t_ns: int) -> None:
+        """A TM[1,x] report: sent now and, the same packet, ``report_repeat_s`` later."""
+        self._report(packet, t_ns)
+        if self._repeat_ns > 0:
+            self._reports.append((t_ns + self._repeat_ns, packet))
 
     def _first_tick(self) -> None:
         if self._horizon_ns >= 0 and self._cmd_pub.get_subscription_count() > 0:
