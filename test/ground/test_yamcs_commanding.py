@@ -35,12 +35,16 @@ def test_tables_issued_in_yamcs_are_sent_whole_and_verified_from_the_onboard_rep
 
     def reports(sent):
         # the onboard reports, as the executor encodes them: the first accepted and executed, the second accepted
-        # then refused as late (5 activities), the third refused at acceptance (a CRC error)
+        # then refused as late (5 activities), the third refused at acceptance (a CRC error). Each report goes
+        # down twice (report_repeat_s); the first table's TM[1,1] is lost the first time: its TM[1,7] comes
+        # alone, then both again (Execution waits for Acceptance: a completed command stops its verifiers)
         tcs = [PusTc.unpack(p) for p in sent]
         t_ns = 10**9
-        return [encode_report(1, tcs[0], t_ns, 0), encode_report(7, tcs[0], t_ns + 1, 1),
+        accepted_0, executed_0 = encode_report(1, tcs[0], t_ns, 0), encode_report(7, tcs[0], t_ns + 1, 1)
+        return [executed_0,
                 encode_report(1, tcs[1], t_ns + 2, 2), encode_report(8, tcs[1], t_ns + 3, 3, FAILURE_LATE, 5),
-                encode_report(2, sent[2], t_ns + 4, 4, ACCEPTANCE_FAILURE_CODES["crc_error"])]
+                encode_report(2, sent[2], t_ns + 4, 4, ACCEPTANCE_FAILURE_CODES["crc_error"]),
+                accepted_0, executed_0]
 
     with running_yamcs(tmp_path / "yamcs") as server:
         sent, history = command_through_yamcs(server, tables, reports, {"Acceptance": 3, "Execution": 2})
