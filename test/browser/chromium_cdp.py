@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import base64
 import json
+import os
 import shutil
 import subprocess
 import tempfile
@@ -35,7 +36,8 @@ class Browser:
         self._process = subprocess.Popen(
             [chromium_path(), "--headless=new", "--no-sandbox", "--disable-gpu", "--remote-debugging-port=0",
              "--no-first-run", f"--user-data-dir={self._profile}", f"--window-size={width},{height}", "about:blank"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            env={**os.environ, "TMPDIR": self._profile})  # its singleton socket directory goes with the profile
         port_file = Path(self._profile) / "DevToolsActivePort"  # Chromium writes its port there once listening
         deadline = time.monotonic() + start_timeout_s
         while not (port_file.exists() and port_file.read_text().strip()):
