@@ -92,8 +92,9 @@ def calibration_choice(star_tracker: Any, torque_channel: dict[str, Any], correc
         caveats.append("the corrected calibration is the torque channel's under the model extended with the named "
                        "effects (" + (", ".join(named) or "impulses only") + "): it trusts the nominal inertia too")
         if corrected.get("alias_uncertain"):
-            caveats.append("left uncertain by an alias of a named effect (the corrected value holds for the named "
-                           "effect only): " + ", ".join(corrected["alias_uncertain"]))
+            caveats.append("left uncertain by an alias or a rival of a named effect (the corrected value is the "
+                           "middle of their range, its sigma carries half of it): "
+                           + ", ".join(corrected["alias_uncertain"]))
         if (verdict or {}).get("unexplained"):
             caveats.append("a gap remains unexplained: no correction covers it")
     if named and not (verdict or {}).get("unexplained"):

@@ -101,7 +101,8 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     reports = check_held_out(inp, calibrated, selection, how_far.reports, options, say)
     lap("held_out")
     reports, verdict = name_effects(calibrated, selection, final, reports)
-    corrected = correct_calibration(inp, nominal, calibrated, reports, verdict, options, say, final.impulses)
+    corrected = correct_calibration(inp, nominal, calibrated, reports, verdict, options, say, final.impulses,
+                                    selection.steps)
     lap("corrected")
 
     result.calibration = {**calibrated.calibration, "readout_response": where.readout_response,

@@ -205,13 +205,17 @@ def _markdown(result: DiagnosisResult, files: list[str], choice: dict[str, Any] 
         lines += ["", "Covariance (12 x 12, relative G then d): report.json `corrected_calibration.covariance`."]
         for alternative in corrected.get("alias_alternatives", []):
             worst = max(abs(x) for x in alternative["shift_from_corrected_sigma"])
-            lines += ["", f"Alias: the data cannot tell `{alternative['named']}` from `{alternative['alias']}`; "
-                          f"corrected with the latter, G and d move by up to {worst:.2f} sigma "
+            lines += ["", f"Alias: the data do not tell `{alternative['named']}` from `{alternative['alias']}` "
+                          "(the same signature, or a fit worse by less than 3 sigma); corrected with the latter, G "
+                          f"and d move by up to {worst:.2f} sigma of the named effect's fit "
                           "(report.json `corrected_calibration.alias_alternatives`)."]
+        if corrected.get("alias_alternatives"):
+            lines += ["", "The corrected values above hold whichever of these is the effect: each is the middle of "
+                          "the range the alternatives span, its sigma the fit's with half that range added "
+                          "(report.json `corrected_calibration.named_effects_calibration`: the named effect's own)."]
         if corrected.get("alias_uncertain"):
-            lines += ["", "**Left uncertain by the alias** (moved by more than 1 sigma between the aliases; the "
-                          "corrected value holds for the named effect only): "
-                      + ", ".join(corrected["alias_uncertain"]) + "."]
+            lines += ["", "**Left uncertain by the alias** (moved by more than 1 sigma between the alternatives: "
+                          "their sigma above carries it): " + ", ".join(corrected["alias_uncertain"]) + "."]
     lines += _impulse_lines(result.impulses)
     remaining = result.verdict.get("remaining", [])
     lines += ["", "## Remaining gap", ""]

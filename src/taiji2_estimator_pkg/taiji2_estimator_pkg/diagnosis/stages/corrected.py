@@ -28,7 +28,7 @@ from taiji2_estimator_pkg.diagnosis.results import EffectReport
 from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
 from taiji2_model.config import SimConfig
 
-__all__ = ["Corrected", "complete_cross_talk", "correct_calibration", "untrusted"]
+__all__ = ["Corrected", "complete_cross_talk", "correct_calibration", "rivals", "untrusted"]
 
 
 @dataclass(frozen=True)
@@ -52,10 +52,12 @@ CORRECTED_ITERATIONS = 8
 
 def correct_calibration(inp: DiagnosisInput, layout: NominalModel | SimConfig, nominal: Nominal,
                         reports: Sequence[EffectReport], verdict: dict[str, Any], options: DiagnosisOptions,
-                        say: Progress, impulses: Impulses | None = None) -> Corrected:
+                        say: Progress, impulses: Impulses | None = None,
+                        steps: Sequence[dict[str, Any]] = ()) -> Corrected:
     """Re-calibrate G and d under the model extended with the named effects (``layout``: the nominal
     model as given to the diagnosis, for the extended layout) and the found impulses (re-fitted with them;
-    not written into the extended layout: they belong to this record, not to the instrument)."""
+    not written into the extended layout: they belong to this record, not to the instrument). ``steps``: the
+    forward selection's trace (stage 3), whose runners-up are the named effects' rivals (:func:`rivals`)."""
     start = nominal.start
     by_key = {c.key: c for c in nominal.candidates}
     standing = [f for f in verdict.get("families", []) if f["stands"]]
@@ -85,8 +87,8 @@ def correct_calibration(inp: DiagnosisInput, layout: NominalModel | SimConfig, n
         say(f"corrected calibration withheld: {withheld}")
         return Corrected({}, extended, withheld)
     corrected.update(_alias_alternatives(inp, start, reports, by_key, [*start.fixed, *held], free, timing_change,
-                                         nominal.calibration, corrected, iterations, say))
-    return Corrected(corrected, extended)
+                                         nominal.calibration, corrected, iterations, say, steps))
+    return Corrected(_envelope(corrected, nominal.calibration), extended)
 
 
 def untrusted(corrected: dict[str, Any], iterations: int) -> str:
@@ -103,22 +105,39 @@ def untrusted(corrected: dict[str, Any], iterations: int) -> str:
     return ""
 
 
-#: aliases of one named effect whose corrected calibration is computed (the strongest first)
-ALIASES_PER_EFFECT = 2
+#: aliases and rivals of one named effect whose corrected calibration is computed (aliases first)
+ALIASES_PER_EFFECT = 3
+
+#: a variant whose gain, at the selection step that accepted a named effect, came within this much delta chi2
+#: of the named one's is its rival: the data prefer the named effect by less than 3 sigma. On a Type-2 record an
+#: imbalance of GRS2's x electrodes (G2_psi biased 15 sigma) gained 66.1, a torque gain about z 71.1: the torque
+#: gain was named, and its correction left G2_psi 9 sigma from the truth.
+RIVAL_DELTA_CHI2 = 9.0
 
 #: a parameter whose corrected value moves by more than this many of its sigmas between aliases is left
 #: uncertain by the alias
 ALIAS_UNCERTAIN_SIGMA = 1.0
 
 
+def rivals(key: str, steps: Sequence[dict[str, Any]]) -> list[str]:
+    """The variants whose gain at the selection step that accepted ``key`` came within :data:`RIVAL_DELTA_CHI2`
+    of its gain (that step's five best: ``steps[i]["top"]``), the strongest first."""
+    for step in steps:
+        if step.get("accepted") == key:
+            return [t["candidate"] for t in step["top"]
+                    if t["candidate"] != key and step["delta_chi2"] - t["delta_chi2"] <= RIVAL_DELTA_CHI2]
+    return []
+
+
 def _alias_alternatives(inp: DiagnosisInput, start: Any, reports: Sequence[EffectReport],
                         by_key: dict[str, Candidate], held: Sequence[Fixed], free: Sequence[Fixed],
                         timing_change: tuple[float, float, float], nominal: dict[str, Any],
-                        corrected: dict[str, Any], iterations: int, say: Progress) -> dict[str, Any]:
+                        corrected: dict[str, Any], iterations: int, say: Progress,
+                        steps: Sequence[dict[str, Any]] = ()) -> dict[str, Any]:
     """The corrected calibration with each named physical effect replaced by each of its physical aliases (the
-    data cannot tell them apart: a torque gain and an inertia error on one axis), and which G and d the choice
-    moves by more than :data:`ALIAS_UNCERTAIN_SIGMA` of their sigma (``alias_uncertain``): there the corrected
-    value holds for the named alias only, and the spread says by how much the others differ."""
+    data cannot tell them apart: a torque gain and an inertia error on one axis) and rivals (the data prefer the
+    named one by less than 3 sigma: :func:`rivals`), and which G and d the choice moves by more than
+    :data:`ALIAS_UNCERTAIN_SIGMA` of their sigma (``alias_uncertain``)."""
     alternatives = []
     sigma = np.concatenate((np.ravel(corrected["g_angular_sigma_relative"]), np.ravel(corrected["com_offset_sigma_m"])))
     base_g, base_d = np.asarray(corrected["g_angular"]), np.asarray(corrected["com_offset_m"])
@@ -128,8 +147,10 @@ def _alias_alternatives(inp: DiagnosisInput, start: Any, reports: Sequence[Effec
         index = next((i for i, entry in enumerate(free) if entry[0].key == report.key), None)
         if index is None:
             continue
-        aliases = [key for key in report.aliases if key in by_key and by_key[key].name not in TIMING_FAMILIES
-                   and key not in {entry[0].key for entry in free}][:ALIASES_PER_EFFECT]
+        named = {entry[0].key for entry in free}
+        aliases = [key for key in dict.fromkeys([*report.aliases, *rivals(report.key, steps)])
+                   if key in by_key and by_key[key].name not in TIMING_FAMILIES and key not in named
+                   ][:ALIASES_PER_EFFECT]
         for alias in aliases:
             _, _, onset, t_ref = free[index]
             other = by_key[alias]
@@ -154,6 +175,36 @@ def _alias_alternatives(inp: DiagnosisInput, start: Any, reports: Sequence[Effec
     return {"alias_alternatives": alternatives, "alias_spread_sigma": spread.tolist(),
             "alias_uncertain": [name.split(" ")[0] for name, value in zip(names, spread, strict=True)
                                 if value > ALIAS_UNCERTAIN_SIGMA]}
+
+
+def _envelope(corrected: dict[str, Any], nominal: dict[str, Any]) -> dict[str, Any]:
+    """The corrected calibration valid under every alternative (issue 39, aliases): each G and d at the middle of
+    the range the named effect and its alternatives span, its sigma that of the named effect's fit with half the
+    range added in quadrature (also on the covariance's diagonal). The truth under any of them is then within its
+    own fit's z of the value, in sigmas of at most sqrt(1 + z^2) (2.24 at z = 2). The named effect's own
+    calibration stays as ``named_effects_calibration``. Unchanged without alternatives."""
+    alternatives = corrected.get("alias_alternatives", [])
+    if not alternatives:
+        return corrected
+    g0, d0 = np.asarray(corrected["g_angular"]), np.asarray(corrected["com_offset_m"])
+    g_all = np.stack([g0, *[np.asarray(a["g_angular"]) for a in alternatives]])
+    d_all = np.stack([d0, *[np.asarray(a["com_offset_m"]) for a in alternatives]])
+    g_mid, d_mid = 0.5 * (g_all.max(axis=0) + g_all.min(axis=0)), 0.5 * (d_all.max(axis=0) + d_all.min(axis=0))
+    g_half = 0.5 * (g_all.max(axis=0) - g_all.min(axis=0)) / np.abs(g_mid)  # relative, as G's sigma
+    d_half = 0.5 * (d_all.max(axis=0) - d_all.min(axis=0))
+    sigma_g = np.hypot(np.asarray(corrected["g_angular_sigma_relative"]), g_half)
+    sigma_d = np.hypot(np.asarray(corrected["com_offset_sigma_m"]), d_half)
+    cov = np.array(corrected["covariance"], dtype=np.float64)
+    cov[np.diag_indices(12)] += np.concatenate((g_half.ravel(), d_half.ravel())) ** 2
+    named = {key: corrected[key] for key in ("g_angular", "g_angular_sigma_relative", "com_offset_m",
+                                             "com_offset_sigma_m", "g_shift_sigma", "d_shift_sigma")}
+    g_nominal, d_nominal = np.asarray(nominal["g_angular"]), np.asarray(nominal["com_offset_m"])
+    return {**corrected, "g_angular": g_mid.tolist(), "g_angular_sigma_relative": sigma_g.tolist(),
+            "com_offset_m": d_mid.tolist(), "com_offset_sigma_m": sigma_d.tolist(), "covariance": cov.tolist(),
+            "g_shift_sigma": ((g_mid / g_nominal - 1.0) / sigma_g).tolist(),
+            "d_shift_sigma": ((d_mid - d_nominal) / sigma_d).tolist(), "named_effects_calibration": named,
+            "alias_half_range_sigma": (np.concatenate((g_half.ravel(), d_half.ravel())) / np.concatenate(
+                (np.ravel(named["g_angular_sigma_relative"]), np.ravel(named["com_offset_sigma_m"])))).tolist()}
 
 
 def complete_cross_talk(free: Sequence[Fixed], candidates: dict[str, Candidate]) -> list[Fixed]:
