@@ -24,7 +24,7 @@ thruster_response                       torque channel ``+ J^-1 (tau_act(T0 + T)
 grs_time_offset                         actuation_delay(delta) + star-tracker attitude ``+omega delta``
 thruster_torque_gain[k]                 torque channel ``+ J^-1 e_k tau_cmd,k``
 com_drift[grs|both.c]                   linear ``+ tc (alpha^pred x e_c)`` of the GRS concerned
-readout_nonlinearity[grs.readout]       readout ``+ k m^2 - 2 k^2 m^3 + 5 k^3 m^4 - 14 k^4 m^5``
+readout_nonlinearity[grs.readout]       readout ``+ k m^2 - 2 k^2 m^3 + 5 k^3 m^4 - ...`` (12 terms)
                                         (m the measured readout: the exact inverse of
                                         ``m = a + k a^2``; fitted by its series, see
                                         :meth:`.record.Record.series_fit`)
