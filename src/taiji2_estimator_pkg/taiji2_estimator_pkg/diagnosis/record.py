@@ -160,15 +160,23 @@ class Record:
         """(estimates, covariance, chi2) of a set of columns."""
         return self.design.fit(self.indices(names))
 
-    def _ensure_series(self, candidate: Candidate) -> list[str]:
-        names = candidate.series_names()
-        missing = [name for name in names if name not in self.ffts]
+    def _ensure_series(self, candidate: Candidate, terms: int | None = None) -> list[str]:
+        """The names of the candidate's series columns (the first ``terms``, or all), built into the design
+        where missing (one term at a time where the candidate builds terms alone)."""
+        names = candidate.series_names()[:terms]
+        missing = [j for j, name in enumerate(names) if name not in self.ffts]
         if missing and candidate.series is not None:
-            ffts = [column_fft(column, self.k_max) for column in candidate.series(self.ctx_of(candidate))]
-            for name, fft in zip(names, ffts, strict=True):
+            ctx = self.ctx_of(candidate)
+            if candidate.series_term is not None:
+                columns = [candidate.series_term(ctx, j) for j in missing]
+            else:
+                columns = [c for j, c in enumerate(candidate.series(ctx)) if j in missing]
+            ffts = [column_fft(column, self.k_max) for column in columns]
+            built = [names[j] for j in missing]
+            for name, fft in zip(built, ffts, strict=True):
                 self.ffts[name] = fft
-            self.names = [*self.names, *names]
-            self.design.append(self.whitener, names, ffts)
+            self.names = [*self.names, *built]
+            self.design.append(self.whitener, built, ffts)
         return names
 
     def add_candidate(self, candidate: Candidate) -> list[str]:
@@ -235,7 +243,16 @@ class Record:
         """
         if candidate.series is None or candidate.coefficients is None:
             raise ValueError(f"{candidate.key} has no series")
-        series = self._ensure_series(candidate)
+        if candidate.leading is not None:  # the leading terms first; all of them only for a magnitude beyond
+            terms, leading_bound = candidate.leading
+            value, chi2 = self._series_fit(candidate, others, terms)
+            if abs(value) <= leading_bound(self.ctx):
+                return value, chi2
+        return self._series_fit(candidate, others, None)
+
+    def _series_fit(self, candidate: Candidate, others: Sequence[str], terms: int | None) -> tuple[float, float]:
+        """:meth:`series_fit` with the first ``terms`` of the series (None: all)."""
+        series = self._ensure_series(candidate, terms)
         design = self.design
         free, fixed = self.indices(others), self.indices(series)
         gram = design.gram
@@ -246,7 +263,8 @@ class Record:
         chi2_others = design.yty - float(design.xty[free] @ solved[:, 0])
         b = design.xty[fixed] - gram[np.ix_(free, fixed)].T @ solved[:, 0]
         m = gram[np.ix_(fixed, fixed)] - gram[np.ix_(free, fixed)].T @ solved[:, 1:]
-        coefficients = candidate.coefficients
+        def coefficients(value: float | np.ndarray) -> np.ndarray:
+            return candidate.coefficients(value)[..., :len(series)]
 
         def objective(value: float) -> float:
             v = coefficients(value)
@@ -362,9 +380,12 @@ class Record:
             self.set_exact_secant(candidate, value, candidate.exact(ctx, value))
         names = candidate.series_names()
         if candidate.series is not None and names and names[0] in self.ffts:
-            for name, column in zip(names, candidate.series(ctx), strict=True):
-                self.ffts[name] = column_fft(column, self.k_max)
-                self.design.replace(self.whitener, name, self.ffts[name])
+            built = [j for j, name in enumerate(names) if name in self.ffts]  # a leading part, or all
+            columns = ([candidate.series_term(ctx, j) for j in built] if candidate.series_term is not None else
+                       [c for j, c in enumerate(candidate.series(ctx)) if j in built])
+            for j, column in zip(built, columns, strict=True):
+                self.ffts[names[j]] = column_fft(column, self.k_max)
+                self.design.replace(self.whitener, names[j], self.ffts[names[j]])
         if candidate.key in self.exact_secants:
             return
         for name, column in zip(candidate.column_names(), self._candidate_columns(candidate), strict=True):
