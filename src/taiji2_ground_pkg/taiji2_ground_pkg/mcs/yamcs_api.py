@@ -27,6 +27,7 @@ __all__ = [
     "UNAUTHORIZED",
     "YamcsAddress",
     "archived_packets",
+    "close_sessions",
     "command_history",
     "connect",
     "credentials",
@@ -158,6 +159,16 @@ def _connected(server: str, environ: Mapping[str, str] | None = None) -> Iterato
                 _CLIENTS.pop(key, None)
             client.close()
         raise
+
+
+def close_sessions(http_port: int) -> None:
+    """Close this process's kept clients of the server on ``http_port`` (by any host name), of every thread:
+    before a server this host runs stops, or their session-renewal threads keep calling a server that is gone."""
+    with _CLIENTS_LOCK:
+        keys = [key for key in _CLIENTS if key[0].rsplit(":", 1)[-1] == str(int(http_port))]
+        clients = [_CLIENTS.pop(key) for key in keys]
+    for client in clients:
+        client.close()
 
 
 def instance_state(http_port: int, instance: str = "taiji2", host: str = "127.0.0.1",

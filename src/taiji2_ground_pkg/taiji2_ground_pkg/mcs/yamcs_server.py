@@ -110,9 +110,13 @@ class YamcsServer:
             time.sleep(poll_s)
 
     def stop(self) -> int | None:
-        """SIGTERM (Yamcs closes its archive), then SIGKILL after a grace; the exit status."""
+        """SIGTERM (Yamcs closes its archive), then SIGKILL after a grace; the exit status. This process's kept
+        clients of the server are closed first (their session renewal would call a server that is gone)."""
+        from taiji2_ground_pkg.mcs.yamcs_api import close_sessions
+
         if self.process is None:
             return None
+        close_sessions(self.http_port)
         if self.process.poll() is None:
             self.process.send_signal(signal.SIGTERM)
             try:
