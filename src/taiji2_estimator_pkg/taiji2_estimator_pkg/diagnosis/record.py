@@ -166,12 +166,8 @@ class Record:
         names = candidate.series_names()[:terms]
         missing = [j for j, name in enumerate(names) if name not in self.ffts]
         if missing and candidate.series is not None:
-            ctx = self.ctx_of(candidate)
-            if candidate.series_term is not None:
-                columns = [candidate.series_term(ctx, j) for j in missing]
-            else:
-                columns = [c for j, c in enumerate(candidate.series(ctx)) if j in missing]
-            ffts = [column_fft(column, self.k_max) for column in columns]
+            ffts = [column_fft(column, self.k_max)
+                    for column in _series_columns(candidate, self.ctx_of(candidate), missing)]
             built = [names[j] for j in missing]
             for name, fft in zip(built, ffts, strict=True):
                 self.ffts[name] = fft
@@ -381,9 +377,7 @@ class Record:
         names = candidate.series_names()
         if candidate.series is not None and names and names[0] in self.ffts:
             built = [j for j, name in enumerate(names) if name in self.ffts]  # a leading part, or all
-            columns = ([candidate.series_term(ctx, j) for j in built] if candidate.series_term is not None else
-                       [c for j, c in enumerate(candidate.series(ctx)) if j in built])
-            for j, column in zip(built, columns, strict=True):
+            for j, column in zip(built, _series_columns(candidate, ctx, built), strict=True):
                 self.ffts[names[j]] = column_fft(column, self.k_max)
                 self.design.replace(self.whitener, names[j], self.ffts[names[j]])
         if candidate.key in self.exact_secants:
@@ -528,6 +522,13 @@ class Record:
         trace_sq = np.einsum("kij,kji->k", ma, ma).real
         mean = -2.0 * float(np.sum(logdet - trace))
         return mean, 2.0 * math.sqrt(max(float(np.sum(trace_sq)), 0.0))
+
+
+def _series_columns(candidate: Candidate, ctx: CandidateContext, terms: Sequence[int]) -> list[np.ndarray]:
+    """The candidate's series columns ``terms`` (indices), each alone where it can build one term alone."""
+    if candidate.series_term is not None:
+        return [candidate.series_term(ctx, j) for j in terms]
+    return [c for j, c in enumerate(candidate.series(ctx)) if j in terms]
 
 
 def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings, iterations: int,
