@@ -41,3 +41,13 @@ def test_named_effects_point_to_calibrate_with_the_extended_layout_and_the_corre
     assert any("alias" in c and "G.1.phi" in c for c in choice["caveats"])
     unexplained = calibration_choice(star, torque, corrected, {"effects": ["com_drift"], "unexplained": True})
     assert unexplained["use"] == "calibrate" and any("unexplained" in c for c in unexplained["caveats"])
+
+
+def test_a_blind_spot_beyond_three_sigma_is_a_caveat_and_one_below_is_not():
+    star, torque = _tables(0.5)
+    spots = [{"family": "cross_coupling", "parameter": "G.2.psi", "bias_sigma": CONSISTENT_SIGMA + 3.4},
+             {"family": "tm_stiffness", "parameter": "d.1.x", "bias_sigma": CONSISTENT_SIGMA - 0.1}]
+    caveats = calibration_choice(star, torque, None, {"effects": [], "unexplained": False}, spots)["caveats"]
+    assert len(caveats) == 1 and "cross_coupling up to 6 sigma on G.2.psi" in caveats[0], caveats
+    assert "tm_stiffness" not in caveats[0]
+    assert calibration_choice(star, torque, None, None, spots[1:])["caveats"] == []

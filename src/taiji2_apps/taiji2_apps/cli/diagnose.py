@@ -103,7 +103,7 @@ def _calibration_choice(raw: Any, config: Any, result: Any) -> dict[str, Any]:
     grs = {gid: (raw.grs(gid).stamp_ns, raw.grs(gid).voltages_v) for gid in (1, 2)}
     record = align_streams(raw.star_tracker.stamp_ns, raw.star_tracker.quat_xyzw, grs, config.sample_rate_hz)
     return calibration_choice(calibrate(record, InstrumentModel.from_layout(config)), result.calibration,
-                              result.corrected, result.verdict)
+                              result.corrected, result.verdict, result.blind_spots)
 
 
 def _share(value: float | None) -> str:

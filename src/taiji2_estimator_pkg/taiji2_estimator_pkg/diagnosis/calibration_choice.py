@@ -24,7 +24,8 @@ _G = ("G_phi", "G_theta", "G_psi")
 
 
 def calibration_choice(star_tracker: Any, torque_channel: dict[str, Any], corrected: dict[str, Any] | None = None,
-                       verdict: dict[str, Any] | None = None) -> dict[str, Any]:
+                       verdict: dict[str, Any] | None = None, blind_spots: list[dict[str, Any]] | None = None
+                       ) -> dict[str, Any]:
     """The calibrations side by side, the one to use and why.
 
     Parameters
@@ -39,6 +40,9 @@ def calibration_choice(star_tracker: Any, torque_channel: dict[str, Any], correc
         model extended with the named effects), added to the rows with its caveats.
     verdict : dict, optional
         The diagnosis's verdict (named effects, unexplained).
+    blind_spots : list of dict, optional
+        The diagnosis's blind spots (``DiagnosisResult.blind_spots``): those of more than
+        :data:`CONSISTENT_SIGMA` become a caveat of the torque-channel and corrected calibrations.
 
     Returns
     -------
@@ -97,6 +101,12 @@ def calibration_choice(star_tracker: Any, torque_channel: dict[str, Any], correc
                            + ", ".join(corrected["alias_uncertain"]))
         if (verdict or {}).get("unexplained"):
             caveats.append("a gap remains unexplained: no correction covers it")
+    unseen = [spot for spot in blind_spots or [] if spot["bias_sigma"] > CONSISTENT_SIGMA]
+    if unseen:
+        caveats.append("effects too small to be named here could still move the torque-channel calibration (and the "
+                       "corrected one) by more than " + f"{CONSISTENT_SIGMA:g} sigma: " + ", ".join(
+                           f"{spot['family']} up to {spot['bias_sigma']:.0f} sigma on {spot['parameter']}"
+                           for spot in unseen[:4]) + " (section Blind spots)")
     if named and not (verdict or {}).get("unexplained"):
         use = "calibrate --config"
         why += (" Effects are named here: take taiji2 calibrate BAG --config FILE, FILE written by taiji2 diagnose "

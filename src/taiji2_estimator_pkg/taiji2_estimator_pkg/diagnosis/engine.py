@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import time
 
+from taiji2_estimator_pkg.diagnosis.blind_spots import blind_spots
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
@@ -96,6 +97,8 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     lap("selection")
     final = final_scan(inp, calibrated, where, selection, options, say)
     lap("final scan")
+    spots = blind_spots(calibrated.full, calibrated.candidates, final.current, calibrated.floor, calibrated.log_n)
+    lap("blind spots")
     how_far = measure_how_far(calibrated, where, selection, final, options, say)
     lap("how_far")
     reports = check_held_out(inp, calibrated, selection, how_far.reports, options, say)
@@ -113,6 +116,7 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     result.corrected, result.extended_layout = corrected.calibration, corrected.layout
     result.corrected_withheld = corrected.withheld
     result.impulses = final.impulses.to_dict()
+    result.blind_spots = [spot.to_dict() for spot in spots]
     result.plots = plot_data(calibrated, where, final, reports, options)
     result.timing_s = lap.total()
     say(f"done in {result.timing_s['total']:.1f} s: {verdict['summary']}")

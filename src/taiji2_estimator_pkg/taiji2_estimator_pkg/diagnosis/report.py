@@ -83,6 +83,22 @@ def _impulse_lines(impulses: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _blind_spot_lines(spots: list[dict[str, Any]]) -> list[str]:
+    """The blind spots section (docs/diagnosis.md, section 6c): families that move G or d by 1 sigma or more."""
+    shown = [spot for spot in spots if spot["bias_sigma"] >= 1.0]
+    lines = ["", "## Blind spots", "",
+             "How far an effect of each family, at the detection threshold of this record (named about half the "
+             "time), moves the torque-channel calibration without being named, in its sigma (first order; "
+             "report.json `blind_spots`). \"No significant gap\" does not rule these out."]
+    if not shown:
+        return [*lines, "", "None above 1 sigma."]
+    lines += ["", "| family | worst variant | moves | by [sigma] | magnitude at threshold |", "|---|---|---|---|---|"]
+    for spot in shown:
+        lines.append(f"| {spot['family']} | {spot['variant'] or '-'} | {spot['parameter']} | "
+                     f"{spot['bias_sigma']:.1f} | {spot['magnitude_at_threshold']:.3g} {spot['unit']} |")
+    return lines
+
+
 def _markdown(result: DiagnosisResult, files: list[str], choice: dict[str, Any] | None = None) -> str:
     lines = ["# Sim-to-real gap diagnosis", ""]
     verdict = result.verdict
@@ -217,6 +233,7 @@ def _markdown(result: DiagnosisResult, files: list[str], choice: dict[str, Any] 
             lines += ["", "**Left uncertain by the alias** (moved by more than 1 sigma between the alternatives: "
                           "their sigma above carries it): " + ", ".join(corrected["alias_uncertain"]) + "."]
     lines += _impulse_lines(result.impulses)
+    lines += _blind_spot_lines(result.blind_spots)
     remaining = result.verdict.get("remaining", [])
     lines += ["", "## Remaining gap", ""]
     if remaining:

@@ -152,6 +152,9 @@ class DiagnosisResult:
     impulses : dict
         Impulsive events found in the final residual (:mod:`.impulses`): their times, angular momenta and
         linear impulses with sigmas, the detection threshold (matched-filter SNR) and the samples searched.
+    blind_spots : list of dict
+        Per effect family not named, how far one at the detection threshold would move G or d, in sigma
+        (:mod:`.blind_spots`), largest first.
     """
 
     status: str
@@ -173,6 +176,7 @@ class DiagnosisResult:
     corrected_withheld: str = ""
     extended_layout: dict[str, Any] | None = None
     impulses: dict[str, Any] = field(default_factory=dict)
+    blind_spots: list[dict[str, Any]] = field(default_factory=list)
 
     def to_json_dict(self, max_locations: int = 25) -> dict[str, Any]:
         """The ``report.json`` content (keys ``locations``, ``effects``, ``verdict`` and more)."""
@@ -190,6 +194,7 @@ class DiagnosisResult:
             "corrected_calibration": self.corrected,
             "corrected_calibration_withheld": self.corrected_withheld,
             "impulses": self.impulses,
+            "blind_spots": self.blind_spots,
             "how_far": self.how_far,
             "inputs": self.inputs,
             "model": self.model,
