@@ -524,6 +524,14 @@ def timing_findings(results: list[dict], sigma_e: float) -> dict:
             "not_named": [f"{k}={v:+.3f} s" for k, v in missed], "named_without_timing": spurious}
 
 
+def wrong_names(r: dict) -> list[str]:
+    """The physical families named in a set that are neither drawn nor an alias of a drawn one (timing names are
+    a reference set's own conventions: not counted)."""
+    drawn = {d["family"] for d in r["drawn"]}
+    return sorted({a["name"] for a in _physical(r["accepted"])
+                   if a["name"] not in drawn and not any(_family(x) in drawn for x in a["aliases"])})
+
+
 def score(results: list[dict], sigma_e: float) -> dict:
     """Score table."""
     table: dict[str, object] = {}
@@ -574,6 +582,10 @@ def score(results: list[dict], sigma_e: float) -> dict:
                    for a in r["accepted"])
 
     table["two_both_found"] = sum(all(covered(r, d) for d in r["drawn"]) for r in two) / max(len(two), 1)
+    table["two_fully_explained"] = sum(all(covered(r, d) for d in r["drawn"]) and not r["verdict"]["unexplained"]
+                                       for r in two) / max(len(two), 1)
+    table["wrong_names"] = [f"set {r['index']}: {name}" for r in results if r["kind"] in ("one", "two")
+                            for name in wrong_names(r)]
     zs = np.array([x["z"] for x in rows if x["z"] is not None])
     table["magnitude_error_sigma_median_abs"] = float(np.median(np.abs(zs))) if zs.size else None
     table["magnitude_error_sigma_rms"] = float(np.sqrt(np.mean(zs ** 2))) if zs.size else None
@@ -674,7 +686,7 @@ def corrected_scores(results: list[dict]) -> dict:
     the truth; the goal is the corrected one within 2 sigma there.
     """
     biased_nominal, biased_corrected, corrected_all = [], [], []
-    sets = 0
+    sets = worse = 0
     for r in results:
         cal = r.get("calibration")
         if not cal or not cal["corrected"] or r["kind"] not in ("one", "two", "multi"):
@@ -687,117 +699,28 @@ def corrected_scores(results: list[dict]) -> dict:
         biased = np.abs(zn) > 3.0
         biased_nominal += zn[biased].tolist()
         biased_corrected += zc[biased].tolist()
+        worse += bool(np.max(np.abs(zc)) > np.max(np.abs(zn)) + 1.0)
     zc_all = np.array(corrected_all)
     zb = np.array(biased_corrected)
     return {"corrected_sets": sets, "corrected_biased_parameters": int(zb.size),
             "corrected_biased_within_2_sigma": float(np.mean(np.abs(zb) <= 2.0)) if zb.size else None,
+            "corrected_biased_within_3_sigma": float(np.mean(np.abs(zb) <= 3.0)) if zb.size else None,
+            "corrected_worse_than_nominal_plus_1_sigma": worse,
             "corrected_biased_nominal_abs_z_median": float(np.median(np.abs(biased_nominal))) if zb.size else None,
             "corrected_biased_abs_z_median": float(np.median(np.abs(zb))) if zb.size else None,
             "corrected_all_z_std": float(np.std(zc_all)) if zc_all.size > 1 else None,
             "corrected_all_within_2_sigma": float(np.mean(np.abs(zc_all) <= 2.0)) if zc_all.size else None}
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sets", type=int, default=40)
-    parser.add_argument("--layout", default="type1")
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--workers", type=int, default=2, help="local Dask workers (default 2)")
-    parser.add_argument("--scheduler", default="", help="address of an existing Dask scheduler instead")
-    parser.add_argument("--duration-s", type=float, default=10800.0)
-    parser.add_argument("--kmin", type=float, default=4.0)
-    parser.add_argument("--kmax", type=float, default=12.0)
-    parser.add_argument("--clean", type=int, default=None, help="number of clean sets (default 20 %%)")
-    parser.add_argument("--reference-fraction", type=float, default=0.5,
-                        help="fraction of the sets drawn at reference fidelity (default 0.5)")
-    parser.add_argument("--json", default="", help="write the per-set results and the table here")
-    parser.add_argument("--out-of-catalog", type=int, default=None,
-                        help="out-of-catalog sets per fidelity (default 15 %%, at least 3)")
-    parser.add_argument("--pairs", type=int, default=None,
-                        help="two-effect sets per fidelity (default 15 %%, at least 3)")
-    parser.add_argument("--impulses", type=int, default=0,
-                        help="impulse sets (a momentum kick, SNR 4..16) per fidelity, added to --sets (default 0)")
-    parser.add_argument("--transients", type=int, default=0,
-                        help="transient sets (a torque pulse) per fidelity, added to --sets (default 0)")
-    parser.add_argument("--multi", type=int, default=0,
-                        help="multi-parameter sets (one effect, several parameters) per fidelity, added to --sets")
-    parser.add_argument("--onset-fraction", type=float, default=0.0,
-                        help="fraction of the drawn effects (single sets, second effect of pairs) that start "
-                             "mid-run (default 0: the plan of the earlier runs)")
-    parser.add_argument("--clipped", action="store_true",
-                        help="simulate the data with the GRS readout saturating at the range (the layout's default); "
-                             "without it the readout is unclipped: the sets fly the layout's square-wave preset, "
-                             "which leaves the range in ~15 %% of Type-1 samples, and clipped samples are outside "
-                             "the diagnosis's model")
-    args = parser.parse_args()
-    workers = max(1, args.workers)
-    config = load_config(args.layout)
-    model = NominalModel.from_config(config)
-    started = time.perf_counter()
-    n = round(args.duration_s * config.sample_rate_hz)
-    commands = maneuver_torque_commands(config, n)
-    data_overrides = {} if args.clipped else {"grs.readout_saturation": False}
-    reference = simulate_batch(load_config(args.layout, data_overrides or None), 10**6 + args.seed, commands)
-    sigmas = variant_sensitivities(prepare_input(reference.t_s, reference.st_quat_xyzw, reference.voltages_v,
-                                                 commands, config.sample_rate_hz), config)
-    print(f"variant sensitivities on a clean reference run: {time.perf_counter() - started:.1f} s", file=sys.stderr)
-    n_reference = round(args.reference_fraction * args.sets)
-    clean = None if args.clean is None else (args.clean - args.clean // 2, args.clean // 2)
-    plan = make_plan(args.sets - n_reference, args.seed, sigmas, model, args.kmin, args.kmax,
-                     None if clean is None else clean[0], "standard", args.onset_fraction,
-                     args.duration_s, args.out_of_catalog, args.pairs) if args.sets - n_reference else []
-    if n_reference:
-        plan += make_plan(n_reference, args.seed + 7919, sigmas, model, args.kmin, args.kmax,
-                          None if clean is None else clean[1], "reference", args.onset_fraction, args.duration_s,
-                          args.out_of_catalog, args.pairs)
-    if args.transients:
-        plan += transient_plan(args.transients, args.seed, model, args.duration_s, "standard")
-        plan += transient_plan(args.transients, args.seed + 1, model, args.duration_s, "reference")
-    if args.impulses:
-        plan += impulse_plan(args.impulses, args.seed, model, args.duration_s, "standard")
-        plan += impulse_plan(args.impulses, args.seed + 1, model, args.duration_s, "reference")
-    if args.multi:
-        plan += multi_plan(args.multi, args.seed, sigmas, model, "standard")
-        plan += multi_plan(args.multi, args.seed + 1, sigmas, model, "reference")
-    for index, entry in enumerate(plan):
-        entry["index"], entry["seed"] = index, args.seed * 1000 + index
-        entry["data_overrides"] = data_overrides
-    results: list[dict] = []
-    failures: list[str] = []
-    with open_cluster(args.scheduler or None, workers) as client:  # Dask: the campaign engine's cluster
-        futures = [client.submit(run_one, (entry, args.layout, args.duration_s), pure=False) for entry in plan]
-        for future in as_completed(futures):
-            try:
-                result = future.result()
-            except Exception as exc:  # a failed set is reported and counted, the others go on
-                failures.append(f"set {plan[futures.index(future)]['index']}: {type(exc).__name__}: {exc}")
-                print(f"set failed: {failures[-1]}", file=sys.stderr, flush=True)
-                continue
-            results.append(result)
-            if args.json:  # as it goes: a cut-short run keeps what it has
-                Path(args.json + ".partial").write_text(json.dumps({"results": results}, default=str))
-            drawn = ", ".join(f"{d['variant']} ({d['k']:.1f} sigma" + (f", from {d['onset_s']:.0f} s" if "onset_s" in d
-                                                                     else "") + ")" for d in result["drawn"]) or (
-                result["private"]["name"] if result["private"] else "none")
-            if result["exclude"]:
-                drawn += f" [{result['exclude']} left out]"
-            truth = result["timing_truth"]
-            if any(truth.values()):
-                drawn += " | timing " + " ".join(f"{k}={v:+.3f}" for k, v in truth.items() if v)
-            got = ", ".join(f"{a['key']}={a['magnitude']:.3g}" if a["timing"] else a["key"]
-                            for a in result["accepted"]) or "-"
-            print(f"[{len(results):3d}/{len(plan)}] {result['fidelity'][:3]} {result['kind']:14s} drawn: {drawn:60s} "
-                  f"-> {got}{' UNEXPLAINED' if result['verdict']['unexplained'] else ''} ({result['seconds']:.1f} s)",
-                  file=sys.stderr, flush=True)
-    results.sort(key=lambda r: r["index"])
-    tables = {"all": score(results, sigmas["time_offset"])}
+def summarize(results: list[dict], sigma_e: float, header: str, failures: list[str], json_path: str) -> None:
+    """Score the results (of one run, one shard, or merged shards), print the tables and the goals, write the JSON."""
+    results = sorted(results, key=lambda r: r["index"])
+    tables = {"all": score(results, sigma_e)}
     for fidelity in ("standard", "reference"):
         subset = [r for r in results if r["fidelity"] == fidelity]
         if subset:
-            tables[fidelity] = score(subset, sigmas["time_offset"])
-    print(f"\nblind benchmark: {len(plan)} data sets of {args.duration_s / 3600:.1f} h ({len(plan) - n_reference} "
-          f"standard, {n_reference} reference fidelity), layout {args.layout}, magnitudes {args.kmin:g}..{args.kmax:g} "
-          f"sigma, wall {time.perf_counter() - started:.0f} s")
+            tables[fidelity] = score(subset, sigma_e)
+    print(f"\nblind benchmark: {header}")
     if failures:
         print(f"  FAILED sets: {len(failures)} ({'; '.join(failures)})")
     width = max(len(k) for k in tables["all"])
@@ -839,14 +762,147 @@ def main() -> int:
                       table["clean_with_an_impulse"] <= 0.05))
         goals.append((f"{name}: multi-parameter effect named as its family alone >= 90 %", table["multi_sets"],
                       table["multi_named_family_only"] >= 0.9 * max(table["multi_sets"], 1)))
-        goals.append((f"{name}: corrected G, d within 2 sigma where biased >= 90 %",
-                      table["corrected_biased_parameters"], (table["corrected_biased_within_2_sigma"] or 0.0) >= 0.9))
-    goals.append(("<= 60 s per 3-h set", len(plan), tables["all"]["seconds_max"] <= 60.0))
-    goals.append(("every set ran", len(plan), not failures))
+        goals.append((f"{name}: both effects of a pair named >= 80 %", table["two_sets"],
+                      table["two_both_found"] >= 0.8))
+        goals.append((f"{name}: pairs fully explained >= 90 %", table["two_sets"],
+                      table["two_fully_explained"] >= 0.9))
+        goals.append((f"{name}: no wrong names", table["single_sets"] + table["two_sets"], not table["wrong_names"]))
+        goals.append((f"{name}: corrected G, d within 3 sigma where biased >= 90 %",
+                      table["corrected_biased_parameters"], (table["corrected_biased_within_3_sigma"] or 0.0) >= 0.9))
+        goals.append((f"{name}: corrected never worse than nominal + 1 sigma", table["corrected_sets"],
+                      table["corrected_worse_than_nominal_plus_1_sigma"] == 0))
+    goals.append(("<= 60 s per 3-h set", len(results), tables["all"]["seconds_max"] <= 60.0))
+    goals.append(("every set ran", len(results) + len(failures), not failures))
     for label, sets, ok in goals:
         print(f"  goal {label}: {'n/a (no such sets)' if not sets else 'met' if ok else 'NOT met'}")
-    if args.json:
-        Path(args.json).write_text(json.dumps({"tables": tables, "results": results}, indent=1, default=str))
+    if json_path:
+        Path(json_path).write_text(json.dumps({"tables": tables, "results": results, "sigma_time_offset_s": sigma_e,
+                                               "failures": failures, "header": header}, indent=1, default=str))
+
+
+def merge(paths: list[str], json_path: str) -> int:
+    """Score the ``--json`` files of shards of one plan together (a set in two files counts once)."""
+    results: dict[int, dict] = {}
+    failures, headers, sigma_e = [], [], None
+    for path in paths:
+        data = json.loads(Path(path).read_text())
+        results.update({r["index"]: r for r in data["results"]})
+        failures += data.get("failures", [])
+        headers.append(data.get("header", path))
+        sigma_e = data["sigma_time_offset_s"]
+    summarize(list(results.values()), sigma_e, f"{len(paths)} shards merged: " + " | ".join(headers), failures,
+              json_path)
+    return 0
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sets", type=int, default=40)
+    parser.add_argument("--layout", default="type1")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--workers", type=int, default=2, help="local Dask workers (default 2)")
+    parser.add_argument("--scheduler", default="", help="address of an existing Dask scheduler instead")
+    parser.add_argument("--duration-s", type=float, default=10800.0)
+    parser.add_argument("--kmin", type=float, default=4.0)
+    parser.add_argument("--kmax", type=float, default=12.0)
+    parser.add_argument("--clean", type=int, default=None, help="number of clean sets (default 20 %%)")
+    parser.add_argument("--reference-fraction", type=float, default=0.5,
+                        help="fraction of the sets drawn at reference fidelity (default 0.5)")
+    parser.add_argument("--json", default="", help="write the per-set results and the table here")
+    parser.add_argument("--out-of-catalog", type=int, default=None,
+                        help="out-of-catalog sets per fidelity (default 15 %%, at least 3)")
+    parser.add_argument("--pairs", type=int, default=None,
+                        help="two-effect sets per fidelity (default 15 %%, at least 3)")
+    parser.add_argument("--impulses", type=int, default=0,
+                        help="impulse sets (a momentum kick, SNR 4..16) per fidelity, added to --sets (default 0)")
+    parser.add_argument("--transients", type=int, default=0,
+                        help="transient sets (a torque pulse) per fidelity, added to --sets (default 0)")
+    parser.add_argument("--multi", type=int, default=0,
+                        help="multi-parameter sets (one effect, several parameters) per fidelity, added to --sets")
+    parser.add_argument("--onset-fraction", type=float, default=0.0,
+                        help="fraction of the drawn effects (single sets, second effect of pairs) that start "
+                             "mid-run (default 0: the plan of the earlier runs)")
+    parser.add_argument("--clipped", action="store_true",
+                        help="simulate the data with the GRS readout saturating at the range (the layout's default); "
+                             "without it the readout is unclipped: the sets fly the layout's square-wave preset, "
+                             "which leaves the range in ~15 %% of Type-1 samples, and clipped samples are outside "
+                             "the diagnosis's model")
+    parser.add_argument("--shard", default="",
+                        help="I/N: run only the sets of the plan whose index is I modulo N (shards of one plan run on "
+                             "several machines or days; --merge their --json files for the whole table)")
+    parser.add_argument("--merge", nargs="+", default=[], metavar="JSON",
+                        help="score the --json files of shards of one plan together instead of running")
+    args = parser.parse_args()
+    if args.merge:
+        return merge(args.merge, args.json)
+    workers = max(1, args.workers)
+    config = load_config(args.layout)
+    model = NominalModel.from_config(config)
+    started = time.perf_counter()
+    n = round(args.duration_s * config.sample_rate_hz)
+    commands = maneuver_torque_commands(config, n)
+    data_overrides = {} if args.clipped else {"grs.readout_saturation": False}
+    reference = simulate_batch(load_config(args.layout, data_overrides or None), 10**6 + args.seed, commands)
+    sigmas = variant_sensitivities(prepare_input(reference.t_s, reference.st_quat_xyzw, reference.voltages_v,
+                                                 commands, config.sample_rate_hz), config)
+    print(f"variant sensitivities on a clean reference run: {time.perf_counter() - started:.1f} s", file=sys.stderr)
+    n_reference = round(args.reference_fraction * args.sets)
+    clean = None if args.clean is None else (args.clean - args.clean // 2, args.clean // 2)
+    plan = make_plan(args.sets - n_reference, args.seed, sigmas, model, args.kmin, args.kmax,
+                     None if clean is None else clean[0], "standard", args.onset_fraction,
+                     args.duration_s, args.out_of_catalog, args.pairs) if args.sets - n_reference else []
+    if n_reference:
+        plan += make_plan(n_reference, args.seed + 7919, sigmas, model, args.kmin, args.kmax,
+                          None if clean is None else clean[1], "reference", args.onset_fraction, args.duration_s,
+                          args.out_of_catalog, args.pairs)
+    if args.transients:
+        plan += transient_plan(args.transients, args.seed, model, args.duration_s, "standard")
+        plan += transient_plan(args.transients, args.seed + 1, model, args.duration_s, "reference")
+    if args.impulses:
+        plan += impulse_plan(args.impulses, args.seed, model, args.duration_s, "standard")
+        plan += impulse_plan(args.impulses, args.seed + 1, model, args.duration_s, "reference")
+    if args.multi:
+        plan += multi_plan(args.multi, args.seed, sigmas, model, "standard")
+        plan += multi_plan(args.multi, args.seed + 1, sigmas, model, "reference")
+    for index, entry in enumerate(plan):
+        entry["index"], entry["seed"] = index, args.seed * 1000 + index
+        entry["data_overrides"] = data_overrides
+    if args.shard:
+        shard, shards = (int(x) for x in args.shard.split("/"))
+        plan = [entry for entry in plan if entry["index"] % shards == shard]
+    results: list[dict] = []
+    failures: list[str] = []
+    with open_cluster(args.scheduler or None, workers) as client:  # Dask: the campaign engine's cluster
+        futures = [client.submit(run_one, (entry, args.layout, args.duration_s), pure=False) for entry in plan]
+        for future in as_completed(futures):
+            try:
+                result = future.result()
+            except Exception as exc:  # a failed set is reported and counted, the others go on
+                failures.append(f"set {plan[futures.index(future)]['index']}: {type(exc).__name__}: {exc}")
+                print(f"set failed: {failures[-1]}", file=sys.stderr, flush=True)
+                continue
+            results.append(result)
+            if args.json:  # as it goes: a cut-short run keeps what it has
+                Path(args.json + ".partial").write_text(json.dumps({"results": results}, default=str))
+            drawn = ", ".join(f"{d['variant']} ({d['k']:.1f} sigma" + (f", from {d['onset_s']:.0f} s" if "onset_s" in d
+                                                                     else "") + ")" for d in result["drawn"]) or (
+                result["private"]["name"] if result["private"] else "none")
+            if result["exclude"]:
+                drawn += f" [{result['exclude']} left out]"
+            truth = result["timing_truth"]
+            if any(truth.values()):
+                drawn += " | timing " + " ".join(f"{k}={v:+.3f}" for k, v in truth.items() if v)
+            got = ", ".join(f"{a['key']}={a['magnitude']:.3g}" if a["timing"] else a["key"]
+                            for a in result["accepted"]) or "-"
+            print(f"[{len(results):3d}/{len(plan)}] {result['fidelity'][:3]} {result['kind']:14s} drawn: {drawn:60s} "
+                  f"-> {got}{' UNEXPLAINED' if result['verdict']['unexplained'] else ''} ({result['seconds']:.1f} s)",
+                  file=sys.stderr, flush=True)
+    header = (f"{len(plan)} data sets of {args.duration_s / 3600:.1f} h ({len(plan) - n_reference} standard, "
+              f"{n_reference} reference fidelity, before impulse, transient and multi sets), layout {args.layout}, "
+              f"magnitudes {args.kmin:g}..{args.kmax:g} sigma, seed {args.seed}"
+              + (f", shard {args.shard} ({len(results) + len(failures)} sets)" if args.shard else "")
+              + f", wall {time.perf_counter() - started:.0f} s")
+    summarize(results, sigmas["time_offset"], header, failures, args.json)
     return 0
 
 

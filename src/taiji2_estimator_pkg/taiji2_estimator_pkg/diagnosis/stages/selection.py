@@ -7,7 +7,9 @@ is positive and its gain passes a Bonferroni floor over the candidates; at most
 ``options.max_effects`` physical effects (timing effects, each timing family at most once, do not
 count). An accepted effect's second-order signature is relinearised at its fitted magnitude, and
 its onset is modelled when the profile likelihood over the onset says it starts mid-run
-(:mod:`..onset`).
+(:mod:`..onset`). At each step the leading variants are also tried from a few onsets on
+(:mod:`.late_start`): an effect that starts mid-run reads weak from the start, and drifts fit it
+better there than its own from-start signature.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from typing import Any
 from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES, Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.onset import onset_posterior
 from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
+from taiji2_estimator_pkg.diagnosis.stages.late_start import late_start
 from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
 
 __all__ = ["Selection", "select_effects"]
@@ -63,6 +66,7 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
     current = list(nominal.nuisance)
     _, _, chi2_current = full.fit(current)
     steps: list[dict[str, Any]] = []
+    late_columns: dict = {}  # the late-start look's column DFTs, built once per selection (.late_start)
     for step in range(options.max_effects + len(TIMING_FAMILIES)):
         evaluations: list[tuple[float, float, Candidate | NoiseCandidate]] = []
         physical_full = _physical_count(accepted) >= options.max_effects
@@ -84,6 +88,17 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
         top = [{"candidate": item[2].key, "delta_chi2": round(item[1], 2), "score": round(item[0], 2)}
                for item in evaluations[:5]]
         passing = [item for item in evaluations if item[0] > 0 and item[1] > floor[item[2].n_params]]
+        late = None
+        if options.onsets and not physical_full:  # the second look: an effect that starts mid-run (.late_start)
+            ranked = [(item[1], item[2]) for item in sorted(evaluations, key=lambda item: -item[1])
+                      if isinstance(item[2], Candidate)]
+            late = late_start(full, ranked, current, chi2_current, nominal.n_candidates, options.alpha_candidates,
+                              log_n, options.onset_penalty, late_columns)
+            late_score = -float("inf") if late is None else late.gain - (late.candidate.n_params + 1) * log_n
+            if late is not None and (not passing or late_score > passing[0][0]):
+                passing = [(late_score, late.gain, late.candidate)]
+            else:
+                late = None
         if not passing:
             steps.append({"step": step + 1, "accepted": None, "top": top})
             break
@@ -91,7 +106,11 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
         accepted.append(best)
         steps.append({"step": step + 1, "accepted": best.key, "delta_chi2": round(gain, 2), "score": round(score, 2),
                       "top": top})
-        say(f"step {step + 1}: accepted {best.key} (delta chi2 {gain:.1f}, score {score:.1f})")
+        if late is not None:
+            steps[-1]["late_start"] = {"trial_onset_s": late.onset_s, "delta_chi2_from_start": round(
+                late.gain_from_start, 2), "floor": round(late.floor, 2)}
+        say(f"step {step + 1}: accepted {best.key} (delta chi2 {gain:.1f}, score {score:.1f}"
+            + (f", from {late.onset_s:.0f} s on: {late.gain_from_start:.1f} from the start" if late else "") + ")")
         if isinstance(best, NoiseCandidate) and noise_step is not None:
             noise_fit = {"kappa": noise_step[0], "gain": noise_step[1], "sigma": noise_step[2]}
             full.rebuild(noise_step[0])
