@@ -41,7 +41,18 @@ Usage::
     python benchmarks/bench_diagnosis_blind.py [--sets 40] [--layout type1] [--seed 1] [--workers 2]
         [--duration-s 10800] [--kmin 4] [--kmax 12] [--reference-fraction 0.5] [--json results.json]
         [--clean N] [--pairs N] [--out-of-catalog N] [--onset-fraction F] [--transients N] [--multi N]
-        [--impulses N] [--clipped]
+        [--impulses N] [--clipped] [--shard I/N] [--merge JSON [JSON ...]]
+
+Several hundred sets take hours on two cores: ``--shard I/N`` runs the sets of the plan whose index is I
+modulo N (the same plan on every shard: give every shard the same other arguments), each writing its
+``--json``; ``--merge`` scores those files together (without running anything).
+
+The plan of issue 39 (pairs with onsets, multi-parameter effects with onsets, impulses; the scores include
+both effects of a pair named, pairs fully explained, wrong names, the corrected G and d within 3 sigma
+where biased and never worse than the nominal calibration + 1 sigma)::
+
+    python benchmarks/bench_diagnosis_blind.py --sets 24 --clean 2 --pairs 6 --out-of-catalog 1 \
+        --onset-fraction 0.5 --impulses 4 --multi 2 --seed 11 --json taiji2_out/blind39.json
 
 The extended plan of issue 24 (onsets, multi-parameter effects, transients, both fidelities)::
 
@@ -128,7 +139,11 @@ def _with_onset(drawn: dict, rng: np.random.Generator, onset_fraction: float, du
     if drawn["family"] not in ONSET_FAMILIES or rng.random() >= onset_fraction:
         rng.random()  # keep the plan's stream independent of the draw
         return drawn
-    onset = float(rng.uniform(0.15, 0.6)) * duration_s
+    return _at_onset(drawn, float(rng.uniform(0.15, 0.6)) * duration_s, duration_s)
+
+
+def _at_onset(drawn: dict, onset: float, duration_s: float) -> dict:
+    """The drawn effect from ``onset`` [s] on, scaled to keep its detectability (see :func:`_with_onset`)."""
     active = 1.0 - onset / duration_s
     scale = active ** -1.5 if ONSET_KINDS[drawn["family"]] == "ramp" else active ** -0.5
     spec = _scaled(drawn["spec"], scale)
@@ -354,10 +369,14 @@ def _merged(specs: list[dict]) -> list[dict]:
 
 
 def multi_plan(count: int, seed: int, sigmas: dict[str, float], model: NominalModel, fidelity: str,
-               kmin: float = 6.0, kmax: float = 12.0) -> list[dict]:
+               kmin: float = 6.0, kmax: float = 12.0, onset_fraction: float = 0.0, duration_s: float = 10800.0
+               ) -> list[dict]:
     """Multi-parameter sets: every variant of one effect of one GRS (or the three axes) at once, each
-    component k sigma (k uniform in kmin..kmax, random sign), the kinds of :data:`MULTI_KINDS` in turn."""
+    component k sigma (k uniform in kmin..kmax, random sign), the kinds of :data:`MULTI_KINDS` in turn; with
+    probability ``onset_fraction`` all of it from one onset on (uniform in 15..60 % of the run, scaled as
+    :func:`_with_onset`)."""
     rng = np.random.default_rng(seed + 32452843)
+    onset_rng = np.random.default_rng(seed + 49979687)  # its own stream: the plan without onsets is unchanged
     candidates, _ = candidate_catalog()
     by_key = {c.key: c for c in candidates}
     plan = []
@@ -374,6 +393,9 @@ def multi_plan(count: int, seed: int, sigmas: dict[str, float], model: NominalMo
             specs.append(by_key[key].inject(np.array([magnitude]), model))
         drawn = [{"family": family, "variant": f"{family}[{prefix}{'+'.join(suffixes)}]", "k": max(ks),
                   "spec": spec, "truth": truth if j == 0 else {}} for j, spec in enumerate(_merged(specs))]
+        if family in ONSET_FAMILIES and onset_rng.random() < onset_fraction:
+            onset = float(onset_rng.uniform(0.15, 0.6)) * duration_s
+            drawn = [_at_onset(d, onset, duration_s) for d in drawn]
         plan.append({"kind": "multi", "effects": drawn, "fidelity": fidelity,
                      "timing": _timing_convention(rng) if fidelity == "reference" else {}})
     return plan
@@ -383,9 +405,14 @@ def multi_scores(results: list[dict]) -> dict:
     """Multi-parameter sets: named as the one drawn family (no other physical name but its aliases, not "unexplained"),
     and the magnitudes (the standing family's vector, else the accepted variants') against the truth."""
     rows = [r for r in results if r["kind"] == "multi"]
-    named, named_once, zs = 0, 0, []
+    named, named_once, zs, onset_z = 0, 0, [], []
     for r in rows:
         family = r["drawn"][0]["family"]
+        onset = r["drawn"][0].get("onset_s")
+        if onset is not None:  # every named variant of the family: its modelled onset against the drawn one
+            onset_z += [(a["onset_s"]["value"] - onset) / a["onset_s"]["sigma"]
+                        for a in _physical(r["accepted"]) if a["name"] == family and a["onset_s"]
+                        and a["onset_s"]["modelled"] and a["onset_s"]["sigma"] > 0]
         truth = r["drawn"][0]["truth"]
         physical = _physical(r["accepted"])
         # every physical name is the family or an alias of it (a torque gain for an inertia error)
@@ -406,7 +433,10 @@ def multi_scores(results: list[dict]) -> dict:
     z = np.array(zs)
     return {"multi_sets": len(rows), "multi_named_family_only": named, "multi_named_as_one_family": named_once,
             "multi_magnitude_z_std": float(np.std(z)) if z.size > 1 else None,
-            "multi_magnitude_within_3_sigma": float(np.mean(np.abs(z) <= 3.0)) if z.size else None}
+            "multi_magnitude_within_3_sigma": float(np.mean(np.abs(z) <= 3.0)) if z.size else None,
+            "multi_with_onset": sum(r["drawn"][0].get("onset_s") is not None for r in rows),
+            "multi_onset_within_2_sigma": (f"{int(np.sum(np.abs(onset_z) <= 2.0))}/{len(onset_z)}" if onset_z
+                                           else None)}
 
 
 def run_one(args: tuple[dict, str, float]) -> dict:
@@ -862,8 +892,10 @@ def main() -> int:
         plan += impulse_plan(args.impulses, args.seed, model, args.duration_s, "standard")
         plan += impulse_plan(args.impulses, args.seed + 1, model, args.duration_s, "reference")
     if args.multi:
-        plan += multi_plan(args.multi, args.seed, sigmas, model, "standard")
-        plan += multi_plan(args.multi, args.seed + 1, sigmas, model, "reference")
+        plan += multi_plan(args.multi, args.seed, sigmas, model, "standard", onset_fraction=args.onset_fraction,
+                           duration_s=args.duration_s)
+        plan += multi_plan(args.multi, args.seed + 1, sigmas, model, "reference", onset_fraction=args.onset_fraction,
+                           duration_s=args.duration_s)
     for index, entry in enumerate(plan):
         entry["index"], entry["seed"] = index, args.seed * 1000 + index
         entry["data_overrides"] = data_overrides
