@@ -17,6 +17,7 @@ from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES
 from taiji2_estimator_pkg.diagnosis.partners import jointly_determined
 from taiji2_estimator_pkg.diagnosis.standing import (
     FAMILY_VARIANTS_MAX,
+    HELDOUT_Z_MIN,
     HELDOUT_Z_MIN_UNEXPLAINED,
     SHRINK_MIN,
     standing_verdict,
@@ -124,9 +125,9 @@ def test_align_streams_removes_a_constant_stamp_phase():
     np.testing.assert_array_equal(inp.voltages_v, out.voltages_v)
 
 
-def _report(key, shrink, heldout_z, name="", variant=""):
+def _report(key, shrink, heldout_z, name="", variant="", expected=None):
     return SimpleNamespace(key=key, name=name or key, variant=variant, accepted=True, rejected=None, shrink=shrink,
-                           heldout_z=heldout_z)
+                           heldout_z=heldout_z, heldout_expected_z=expected)
 
 
 def test_naming_rule():
@@ -139,6 +140,20 @@ def test_naming_rule():
     assert not weak.accepted and "held-out" in weak.rejected
     named, rejected = standing_verdict([_report("c", 0.9, HELDOUT_Z_MIN_UNEXPLAINED - 0.5)], unexplained=False)
     assert [r.key for r in named] == ["c"] and rejected == {}
+
+
+def test_a_held_out_part_too_weak_to_confirm_an_effect_refuses_it_only_where_it_contradicts_it():
+    # expected z 2.2 (< HELDOUT_Z_MIN + 2): z = 0.6 is no evidence against it; z = -1 is (3.2 below)
+    weak_test = _report("drift", 0.9, 0.6, expected=2.2)
+    contradicted = _report("other", 0.9, -1.0, expected=2.2)
+    named, rejected = standing_verdict([weak_test, contradicted], unexplained=False)
+    assert named == [weak_test] and "contradicted" in rejected["other"]
+    # an informative held-out part (expected z 4) still needs z >= HELDOUT_Z_MIN
+    named, rejected = standing_verdict([_report("x", 0.9, 0.6, expected=HELDOUT_Z_MIN + 3.0)], unexplained=False)
+    assert not named and "not confirmed" in rejected["x"]
+    # beside an unexplained gap the rule stays as it was (partial explanations)
+    named, rejected = standing_verdict([_report("y", 0.9, 0.6, expected=2.2)], unexplained=True)
+    assert not named and "not confirmed" in rejected["y"]
 
 
 def test_partners_are_effects_whose_magnitudes_correlate_almost_perfectly():

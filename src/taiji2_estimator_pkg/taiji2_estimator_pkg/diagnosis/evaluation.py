@@ -14,7 +14,9 @@ Definitions (``docs/diagnosis.md``):
   held-out part (recalibrated there): ``G_ho / max(G_best + R+, F)`` with G_ho the held-out gain of
   the trained magnitude, G_best that of the held-out part's own fit; ``heldout_z`` tests G_ho
   against "no effect" (G_ho ~ N(-P, 4P), P the held-out power of the trained signature; for the
-  star-tracker noise, the mean and std of G_ho with no extra noise, ``Record.noise_gain_null``).
+  star-tracker noise, the mean and std of G_ho with no extra noise, ``Record.noise_gain_null``); with the
+  effect present at its trained magnitude G_ho ~ N(P, 4P), so ``heldout_z`` ~ N(sqrt(P), 1):
+  ``heldout_expected_z = sqrt(P)`` says how strongly the held-out part could confirm it at all.
 """
 
 from __future__ import annotations
@@ -172,6 +174,7 @@ def held_out_deterministic(train: Record, test: Record, candidate: Candidate, ot
         "heldout_delta_chi2": gain_fixed, "heldout_delta_chi2_best": gain_best,
         "shrink_heldout": gain_fixed / denominator if denominator > 0 else None,
         "heldout_z": (gain_fixed + power) / (2.0 * math.sqrt(power)) if power > 0 else None,
+        "heldout_expected_z": math.sqrt(power) if power > 0 else None,
     }
 
 
