@@ -929,8 +929,9 @@ def main() -> int:
             print(f"[{len(results):3d}/{len(plan)}] {result['fidelity'][:3]} {result['kind']:14s} drawn: {drawn:60s} "
                   f"-> {got}{' UNEXPLAINED' if result['verdict']['unexplained'] else ''} ({result['seconds']:.1f} s)",
                   file=sys.stderr, flush=True)
-    header = (f"{len(plan)} data sets of {args.duration_s / 3600:.1f} h ({len(plan) - n_reference} standard, "
-              f"{n_reference} reference fidelity, before impulse, transient and multi sets), layout {args.layout}, "
+    n_standard = sum(entry["fidelity"] == "standard" for entry in plan)
+    header = (f"{len(plan)} data sets of {args.duration_s / 3600:.1f} h ({n_standard} standard, "
+              f"{len(plan) - n_standard} reference fidelity), layout {args.layout}, "
               f"magnitudes {args.kmin:g}..{args.kmax:g} sigma, seed {args.seed}"
               + (f", shard {args.shard} ({len(results) + len(failures)} sets)" if args.shard else "")
               + f", wall {time.perf_counter() - started:.0f} s")
