@@ -24,9 +24,11 @@ torque noise and GRS angular readout noise, both white at 10 Hz):
   neighbours (the template's support) then left out; more than :data:`MAX_IMPULSES` exceedances are not
   impulses but a residual the noise model does not describe (a timing convention left unfitted): none is
   reported, and the search says it stopped;
-- samples within :data:`EDGE_GUARD_S` of a change of the commanded torque are not searched (a
-  timing convention fitted slightly off leaves its residual exactly there), nor the record's ends
-  that the torque channel leaves out, nor epochs the input estimated (bridged gaps).
+- within :data:`EDGE_GUARD_S` of a change of the commanded torque, a timing convention fitted slightly
+  off leaves its residual; it is the same at every change of the same step, so the mean pattern of the
+  other changes of that step is subtracted there (:mod:`.edge_pattern`) and those samples are searched
+  too, except near a step seen fewer than 8 times; not searched: the record's ends that the torque
+  channel leaves out, epochs the input estimated (bridged gaps).
 
 Each event is then fitted in six degrees of freedom at its sample: the angular momentum
 ``L = J A dt`` and, from the common linear channel (prewhitened by ``1 - phi z``: an impulse is the
@@ -48,16 +50,18 @@ from scipy.stats import chi2
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, CandidateContext, _perturb, _torque_column
 from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
 from taiji2_estimator_pkg.diagnosis.dynamics import ResponseFit
+from taiji2_estimator_pkg.diagnosis.edge_pattern import remove_edge_pattern
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 
 __all__ = ["EDGE_GUARD_S", "FALSE_ALARM_PER_RECORD", "MAX_IMPULSES", "Impulse", "detect_impulses",
-           "impulse_candidate"]
+           "impulse_candidate", "search_input"]
 
 FALSE_ALARM_PER_RECORD = 0.01
 """alpha: probability of one or more reported impulses in a record of pure noise (Bonferroni over samples)."""
 
 EDGE_GUARD_S = 0.5
-"""Samples this close to a change of the commanded torque [s] are not searched (timing residuals sit there)."""
+"""Samples this close to a change of the commanded torque [s] carry its timing residual: the change's pattern is
+removed there (:mod:`.edge_pattern`), or, for a step seen too rarely, they are not searched."""
 
 MAX_IMPULSES = 50
 """More exceedances than this are not a few impulses but a residual the noise model does not describe:
@@ -150,24 +154,23 @@ def _robust_cov(x: np.ndarray) -> np.ndarray:
     return np.cov(core, rowvar=False)
 
 
-def searchable(n: int, torque_cmd_n_m: np.ndarray, torque_edges: tuple[int, int], filled: np.ndarray | None,
-               dt_s: float) -> np.ndarray:
-    """(n,) samples the search may report: inside the torque channel's edges, away from command changes,
-    measured (not bridged)."""
+def search_input(residual: np.ndarray, torque_cmd_n_m: np.ndarray, torque_edges: tuple[int, int],
+                 filled: np.ndarray | None, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The residual the search reads (the torque channel's patterns at the command changes removed,
+    :mod:`.edge_pattern`) and the (n,) samples it may report: inside the torque channel's edges, measured (not
+    bridged), not near a change whose step is too rare for its pattern."""
+    n = residual.shape[0]
+    cleaned, guarded = remove_edge_pattern(residual[:, _TORQUE], torque_cmd_n_m, math.ceil(EDGE_GUARD_S / dt_s))
+    out = np.array(residual, copy=True)
+    out[:, _TORQUE] = cleaned
     keep = np.zeros(n, dtype=bool)
     head, tail = torque_edges
     keep[head + _KERNEL_HALF:n - tail - _KERNEL_HALF - 1] = True
-    changes = np.flatnonzero(np.any(np.diff(torque_cmd_n_m, axis=0) != 0.0, axis=1)) + 1
-    guard = math.ceil(EDGE_GUARD_S / dt_s)
-    if changes.size:
-        near = np.zeros(n + 1, dtype=np.int64)
-        np.add.at(near, np.clip(changes - guard, 0, n), 1)
-        np.add.at(near, np.clip(changes + guard + 1, 0, n), -1)
-        keep &= np.cumsum(near)[:n] == 0
+    keep &= ~guarded
     if filled is not None:
         bridged = np.convolve(np.asarray(filled, dtype=float), np.ones(2 * _KERNEL_HALF + 1), mode="same") > 0
         keep &= ~bridged
-    return keep
+    return out, keep
 
 
 def detect_impulses(residual: np.ndarray, response: ResponseFit | None, model: NominalModel, t_s: np.ndarray,
@@ -185,7 +188,7 @@ def detect_impulses(residual: np.ndarray, response: ResponseFit | None, model: N
     t_s : numpy.ndarray
         (n,) sample stamps [s] (the end of each sample's integration step).
     keep : numpy.ndarray
-        (n,) samples the search may report (:func:`searchable`).
+        (n,) samples the search may report (:func:`search_input`, which also gives the residual).
 
     Returns
     -------
