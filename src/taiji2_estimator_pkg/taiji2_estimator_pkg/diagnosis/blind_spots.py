@@ -118,7 +118,7 @@ def blind_spots(full: Record, candidates: Sequence[Candidate], current: Sequence
         explained = np.einsum("ia,ab,ib->i", cross, info, cross)
         own = np.diag(cov)[:CALIBRATION_PARAMETERS] - explained
         gain = detection_gain(p, floor, log_n)
-        ratio = np.sqrt(gain * np.maximum(explained, 0.0) / np.maximum(own, 1e-300 * np.abs(explained) + 1e-300))
+        ratio = np.sqrt(gain * np.maximum(explained, 0.0) / np.maximum(own, 1e-300))
         i = int(np.argmax(ratio))
         _, sigma = candidate.magnitude(np.zeros(p), cov[-p:, -p:])
         spot = BlindSpot(candidate.name, candidate.variant, current[i], float(ratio[i]), math.sqrt(gain) * sigma,

@@ -28,7 +28,7 @@ from taiji2_estimator_pkg.diagnosis.dynamics import ResponseFit, fit_response
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.locations import scan_keep
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
-from taiji2_estimator_pkg.diagnosis.spectral import Design, NoiseSpectrum, Whitener, dft
+from taiji2_estimator_pkg.diagnosis.spectral import ConditionedFit, Design, NoiseSpectrum, Whitener, dft
 
 __all__ = ["Record", "RecordSettings", "calibrate", "column_fft", "fixed_change"]
 
@@ -386,15 +386,26 @@ class Record:
             self.ffts[name] = column_fft(column, self.k_max)
             self.design.replace(self.whitener, name, self.ffts[name])
 
-    def onset_profile(self, candidate: Candidate, others: Sequence[str], onsets_s: Sequence[float]
+    def onset_profile(self, candidate: Candidate, others: Sequence[str], onsets_s: Sequence[float],
+                      fixed: ConditionedFit | None = None,
+                      columns: dict[tuple[str, float], list[np.ndarray]] | None = None
                       ) -> tuple[np.ndarray, np.ndarray]:
         """chi2 and ``log det`` of the candidate's parameter covariance for each trial onset, ``others``
-        refitted (the profile likelihood over the onset; :func:`.onset.onset_posterior`)."""
+        refitted (the profile likelihood over the onset; :func:`.onset.onset_posterior`). ``fixed``: the
+        others' normal equations already factored (``design.conditioned``); ``columns``: (variant key, onset)
+        -> column DFTs kept across calls by a caller whose variant's signature does not change meanwhile."""
         chi2 = np.empty(len(onsets_s))
         log_det = np.empty(len(onsets_s))
-        fixed = self.design.conditioned(self.indices(others))  # the others' normal equations, factored once
+        if fixed is None:
+            fixed = self.design.conditioned(self.indices(others))  # the others' normal equations, factored once
         for i, onset in enumerate(onsets_s):
-            _, cov, chi2[i] = fixed.add(self.whitener, self.column_ffts(candidate, float(onset)))
+            key = (candidate.key, float(onset))
+            ffts = None if columns is None else columns.get(key)
+            if ffts is None:
+                ffts = self.column_ffts(candidate, float(onset))
+                if columns is not None:
+                    columns[key] = ffts
+            _, cov, chi2[i] = fixed.add(self.whitener, ffts)
             sign, value = np.linalg.slogdet(cov)
             log_det[i] = value if sign > 0 else -np.inf
         return chi2, log_det

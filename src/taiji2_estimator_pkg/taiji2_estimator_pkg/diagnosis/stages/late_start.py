@@ -95,14 +95,8 @@ def late_start(full: Record, ranked: Sequence[tuple[float, Candidate]], current:
     fixed = full.design.conditioned(full.indices(current))  # the current model's normal equations, factored once
 
     def profile(candidate: Candidate, points: Sequence[float]) -> np.ndarray:
-        """chi2 of the current model with the variant from each onset (cf. Record.onset_profile)."""
-        out = []
-        for onset in points:
-            key = (candidate.key, float(onset))
-            if key not in columns:
-                columns[key] = full.column_ffts(candidate, float(onset))
-            out.append(fixed.add(full.whitener, columns[key])[2])
-        return np.array(out)
+        """chi2 of the current model with the variant from each onset."""
+        return full.onset_profile(candidate, current, points, fixed=fixed, columns=columns)[0]
 
     screen = [float(profile(candidate, middle)[0]) for _, candidate in physical]
     leading = [physical[i] for i in np.argsort(screen)[:LEADING]]
