@@ -172,3 +172,39 @@ def test_nonlinearity_of_a_square_wave_readout_needs_the_series():
     assert abs(theta[-1] - k) > 10 * np.sqrt(cov[-1, -1])  # the first-order fit is badly biased
     theta, cov, _ = record.refine(candidate, record.nuisance)
     assert abs(theta[-1] - k) < 3 * np.sqrt(cov[-1, -1])
+
+
+def _onset_misfit(columns, lin, model, n):
+    """Relative misfit of noise-free channels by the columns, in the metric of the fit (below 0.05 Hz)."""
+    k_max = int(0.05 * n / 10.0)
+    noise = np.sqrt(NoiseSpectrum(model, model.com_offset_m, n).marginal(np.arange(1, k_max + 1)))
+    y = (dft(lin.channels, k_max) / noise).ravel()
+    x = (np.stack([dft(c, k_max) for c in columns], axis=-1) / noise[:, :, None]).reshape(-1, len(columns))
+    design = np.concatenate((x.real, x.imag))
+    target = np.concatenate((y.real, y.imag))
+    fitted, *_ = np.linalg.lstsq(design, target, rcond=None)
+    return float(np.linalg.norm(target - design @ fitted) / np.linalg.norm(target)), fitted
+
+
+def test_gravity_gradient_from_an_onset_needs_its_mean():
+    """A gravity gradient that starts mid-run steps by its mean torque, not only by its 2n harmonic: noise-free,
+    the three axes' (cos, sin, mean) columns from the onset fit it, the harmonic alone leaves a large misfit, and
+    from the start the mean's column is zero (it is the dropped DC bin)."""
+    n, onset_s = 2 * HOUR_SAMPLES, 1800.0
+    effect = make_effect(name="gravity_gradient", scale=0.2, onset_s=onset_s)
+    _, inp = _run("type1", n, 1, [effect], quiet=True)
+    model = NominalModel.from_config(load_config("type1"))
+    readouts = readouts_from_input(inp, model)
+    lin = linearize(readouts, model, model.g_angular, model.com_offset_m)
+    ctx = CandidateContext(lin, readouts, model, 86164.1, 0.01, 0.7, 0.5 * (0.1 + n * 0.1))
+    variants = [c for c in candidate_catalog()[0] if c.name == "gravity_gradient"]
+    assert all(c.n_params == 2 and c.n_params_from_onset == 3 for c in variants)
+    at_onset = ctx.at_onset("step", onset_s)
+    columns = [column for c in variants for column in c.build(at_onset)]
+    misfit, fitted = _onset_misfit(columns, lin, model, n)
+    harmonic_only, _ = _onset_misfit([column for i, column in enumerate(columns) if i % 3 != 2], lin, model, n)
+    assert misfit < 0.05
+    assert harmonic_only > 10.0 * misfit  # measured: 0.023 against 0.0008
+    tau_0, _, _ = effect.harmonic_coefficients_n_m(model.inertia_kg_m2)
+    np.testing.assert_allclose(fitted[2::3], tau_0, rtol=0.05, atol=0.05 * np.max(np.abs(tau_0)))
+    assert not np.any([c.build(ctx)[2] for c in variants])

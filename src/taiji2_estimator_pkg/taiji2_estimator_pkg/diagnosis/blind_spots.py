@@ -117,7 +117,7 @@ def blind_spots(full: Record, candidates: Sequence[Candidate], current: Sequence
         info = np.linalg.pinv(cov[-p:, -p:])  # Sigma_(theta theta)^-1
         explained = np.einsum("ia,ab,ib->i", cross, info, cross)
         own = np.diag(cov)[:CALIBRATION_PARAMETERS] - explained
-        gain = detection_gain(p, floor, log_n)
+        gain = detection_gain(candidate.n_params, floor, log_n)
         ratio = np.sqrt(gain * np.maximum(explained, 0.0) / np.maximum(own, 1e-300))
         i = int(np.argmax(ratio))
         _, sigma = candidate.magnitude(np.zeros(p), cov[-p:, -p:])

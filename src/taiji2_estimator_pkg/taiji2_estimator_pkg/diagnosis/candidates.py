@@ -4,8 +4,8 @@ Length (over 600 lines): the one table of signatures below and the factory of ea
 side, so that a signature and its code are read and changed together.
 
 Every catalog effect (:mod:`taiji2_model.effect_catalog`) is split into *variants*, one per
-GRS / axis / readout it can act on, each with one parameter (two for the gravity gradient: the
-quadrature pair of its 2n harmonic), in the SI unit of the simulator's parameter, so that a fitted
+GRS / axis / readout it can act on, each with one parameter (the gravity gradient: the quadrature
+pair of its 2n harmonic, and its mean, seen only where it starts mid-run), in the SI unit of the simulator's parameter, so that a fitted
 magnitude can be compared with an injected one. A variant's columns are the first-order change
 of the 15 channels per unit parameter, derived from the calibrated data at the linearization
 point (:func:`.channels.perturbation_channels`). The star-tracker low-frequency noise is a noise
@@ -29,7 +29,9 @@ readout_nonlinearity[grs.readout]       readout ``+ k m^2 - 2 k^2 m^3 + 5 k^3 m^
                                         ``m = a + k a^2``; fitted by its series, see
                                         :meth:`.record.Record.series_fit`)
 inertia_error[k] / [kl]                 torque channel ``- J^-1 dJ alpha^pred``
-gravity_gradient[k]                     torque channel ``+ J^-1 e_k (cos 2nt, sin 2nt)``
+gravity_gradient[k]                     torque channel ``+ J^-1 e_k (cos 2nt, sin 2nt, 1)`` (the mean:
+                                        only from an onset on; from the start it is the
+                                        dropped DC bin)
 tm_stiffness[grs.c]                     linear readout ``- H(s) l^data``
 thruster_force_leakage[c.k]             spacecraft acceleration ``+ e_c tau_cmd,k / M``
 star_tracker_lowfreq_noise              star-tracker channel PSD ``+ f_knee^2 x template``
@@ -175,7 +177,7 @@ class Candidate:
     variant : str
         Where it acts, e.g. ``"grs1.y"``.
     params : tuple of str
-        Parameter names (one, or the quadrature pair of the gravity gradient).
+        Parameter names (one, or the quadrature pair of the gravity gradient and its mean).
     unit : str
         Unit of the magnitude.
     build : callable
@@ -222,6 +224,11 @@ class Candidate:
     exact: Callable[[CandidateContext, float], np.ndarray] | None = None
     series_term: Callable[[CandidateContext, int], np.ndarray] | None = None
     leading: tuple[int, Callable[[CandidateContext], float]] | None = None
+    step_params: int = 0
+    """The last ``step_params`` parameters act only from a step onset on: their columns are zero for an effect
+    present from the start (a constant torque from the start is the dropped DC bin of its channel: the free
+    offset absorbs it), so the effect has ``n_params`` parameters from the start and ``n_params_from_onset``
+    from an onset."""
 
     def series_sum(self, ctx: CandidateContext, weights: np.ndarray) -> np.ndarray:
         """``sum_j weights_j c_j`` of the series columns; the terms of zero weight are not built when the
@@ -251,12 +258,24 @@ class Candidate:
 
     @property
     def n_params(self) -> int:
-        """Number of parameters."""
+        """Number of parameters of the effect present from the start (:attr:`step_params` excluded)."""
+        return len(self.params) - self.step_params
+
+    @property
+    def n_params_from_onset(self) -> int:
+        """Number of parameters of the effect from a step onset on."""
         return len(self.params)
 
+    def n_params_at(self, onset_s: float | None) -> int:
+        """Number of parameters of the effect from ``onset_s`` on (None: from the start)."""
+        return self.n_params if onset_s is None else self.n_params_from_onset
+
     def magnitude(self, theta: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
-        """Magnitude and its 1-sigma: the parameter, or the amplitude of a quadrature pair."""
-        theta = np.asarray(theta, dtype=np.float64)
+        """Magnitude and its 1-sigma: the parameter, or the amplitude of a quadrature pair (of the parameters
+        present from the start; a step-only mean does not enter)."""
+        q = self.n_params
+        theta = np.asarray(theta, dtype=np.float64)[:q]
+        cov = np.asarray(cov, dtype=np.float64)[:q, :q]
         if theta.size == 1:
             return float(theta[0]), float(math.sqrt(max(cov[0, 0], 0.0)))
         amplitude = float(np.hypot(*theta))
@@ -542,10 +561,12 @@ def _gravity_gradient(axis: int, orbit_period_s: float) -> Candidate:
         rate = 2.0 * math.pi / ctx.orbit_period_s
         start = ctx.readouts.t_s - ctx.readouts.dt_s  # torque held over the step from its start
         columns = []
-        for wave in (np.cos, np.sin):
+        for wave in (np.cos, np.sin, np.ones_like):
             torque = np.zeros((start.shape[0], 3))
             torque[:, axis] = wave(2.0 * rate * start)
             columns.append(_torque_column(ctx, torque))
+        if ctx.step_from_s is None:  # the mean from the start: the dropped DC bin (Candidate.step_params)
+            columns[-1] = np.zeros_like(columns[-1])
         return columns
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
@@ -553,9 +574,10 @@ def _gravity_gradient(axis: int, orbit_period_s: float) -> Candidate:
         _, tau_c, tau_s = effect.harmonic_coefficients_n_m(model.inertia_kg_m2)
         unit_amplitude = float(np.hypot(tau_c[axis], tau_s[axis]))
         return {"name": "gravity_gradient", "orbit_period_s": orbit_period_s,
-                "scale": float(np.hypot(*theta)) / unit_amplitude if unit_amplitude > 0 else 0.0}
+                "scale": float(np.hypot(theta[0], theta[1])) / unit_amplitude if unit_amplitude > 0 else 0.0}
 
-    return Candidate("gravity_gradient", _AXES[axis], ("cos_n_m", "sin_n_m"), "N m", build, inject)
+    return Candidate("gravity_gradient", _AXES[axis], ("cos_n_m", "sin_n_m", "mean_n_m"), "N m", build, inject,
+                     step_params=1)
 
 
 def _tm_stiffness(grs: int, axis: int, suspension_hz: float, damping: float) -> Candidate:

@@ -110,12 +110,12 @@ def fixed_from_specs(specs: Sequence[Mapping[str, Any]], model: NominalModel, se
         elif name == "gravity_gradient":
             params = {k: spec[k] for k in ("orbit_period_s", "orbit_normal", "phase_rad", "scale") if k in spec}
             effect = GravityGradient(**params)
-            _, tau_c, tau_s = effect.harmonic_coefficients_n_m(model.inertia_kg_m2)
+            tau_0, tau_c, tau_s = effect.harmonic_coefficients_n_m(model.inertia_kg_m2)
             two_phase = 2.0 * effect.phase_rad
             for axis in range(3):
                 cos_n_m = tau_c[axis] * math.cos(two_phase) + tau_s[axis] * math.sin(two_phase)
                 sin_n_m = -tau_c[axis] * math.sin(two_phase) + tau_s[axis] * math.cos(two_phase)
-                add(f"gravity_gradient[{_AXES[axis]}]", [cos_n_m, sin_n_m], onset)
+                add(f"gravity_gradient[{_AXES[axis]}]", [cos_n_m, sin_n_m, tau_0[axis]], onset)
         elif name == "tm_stiffness":
             add(f"tm_stiffness[grs{spec.get('grs', 1)}.{spec.get('axis', 'x')}]", [spec.get("stiffness_s2", 0.0)],
                 onset)
@@ -151,8 +151,9 @@ def named_extension(reports: Sequence[Any], candidates: Mapping[str, Candidate],
         magnitudes = iter(family["magnitudes"])
         for key in family["variants"]:
             values_of[key] = np.array([next(magnitudes) for _ in candidates[key].params], dtype=np.float64)
-    entries = [(report.key, np.array([report.parameters[p]["value"] for p in candidates[report.key].params],
-                                     dtype=np.float64))
+    # a step-only parameter of an effect from the start is not reported (Candidate.step_params): zero
+    entries = [(report.key, np.array([report.parameters.get(p, {"value": 0.0})["value"]
+                                      for p in candidates[report.key].params], dtype=np.float64))
                for report in reports if report.accepted and report.key in candidates and report.key not in values_of]
     for key, values in [*entries, *values_of.items()]:
         candidate = candidates[key]

@@ -406,7 +406,10 @@ class Record:
                 if columns is not None:
                     columns[key] = ffts
             _, cov, chi2[i] = fixed.add(self.whitener, ffts)
-            sign, value = np.linalg.slogdet(cov)
+            # the parameters present from the start only: a step-only one (Candidate.step_params) is profiled,
+            # its flat-prior integral diverging as the onset nears the start, where its column vanishes
+            q = candidate.n_params
+            sign, value = np.linalg.slogdet(cov[:q, :q])
             log_det[i] = value if sign > 0 else -np.inf
         return chi2, log_det
 

@@ -97,6 +97,7 @@ def _reports(full: Record, candidates: Sequence[Candidate], noise: NoiseCandidat
         index = [position[name] for name in names]
         theta, cov = theta_final[index], cov_final[np.ix_(index, index)]
         magnitude, sigma = candidate.magnitude(theta, cov)
+        n_params = candidate.n_params_at(full.onsets.get(candidate.key))
         dropped = set(names).union(*(columns_of[key] for key in partners.get(candidate.key, [])))
         others = [name for name in current if name not in dropped]
         theta_o, _, chi2_o = full.fit(others)
@@ -105,10 +106,11 @@ def _reports(full: Record, candidates: Sequence[Candidate], noise: NoiseCandidat
         shrink, cells = accepted_report_data(full, names, theta, full.residual_fft(others, theta_o), residual_final,
                                              gain, edges, period, halfwidth, floor)
         reports.append(EffectReport(
-            candidate.name, candidate.variant, magnitude, sigma, candidate.unit, gain - candidate.n_params * log_n,
-            gain, candidate.n_params, True, shrink,
+            candidate.name, candidate.variant, magnitude, sigma, candidate.unit, gain - n_params * log_n,
+            gain, n_params, True, shrink,
             parameters={p: {"value": float(v), "sigma": float(math.sqrt(max(cov[i, i], 0.0)))}
-                        for i, (p, v) in enumerate(zip(candidate.params, theta, strict=True))},
+                        for i, (p, v) in enumerate(zip(candidate.params, theta, strict=True))
+                        if i < n_params},
             aliases=aliases.of(candidate), partners=partners.get(candidate.key, []), g_shift=g_shift,
             d_shift=d_shift, cells=cells, injection=candidate.inject(theta, model)))
     accepted_families = {c.name for c in accepted}
@@ -126,6 +128,7 @@ def _reports(full: Record, candidates: Sequence[Candidate], noise: NoiseCandidat
         names = candidate.column_names()
         p = len(names)
         theta_all, cov_all, _ = full.fit(current + names)
+        q = candidate.n_params  # from the start: a step-only parameter's column is zero
         theta, cov = theta_all[-p:], cov_all[-p:, -p:]
         magnitude, sigma = candidate.magnitude(theta, cov)
         shrink, cells = accepted_report_data(full, names, theta, residual_final,
@@ -133,9 +136,9 @@ def _reports(full: Record, candidates: Sequence[Candidate], noise: NoiseCandidat
                                              halfwidth, floor)
         g_shift, d_shift = _shifts(theta_all, theta_final, cov_all)
         reports.append(EffectReport(
-            candidate.name, candidate.variant, magnitude, sigma, candidate.unit, score, gain, p, False, shrink,
-            parameters={q: {"value": float(v), "sigma": float(math.sqrt(max(cov[i, i], 0.0)))}
-                        for i, (q, v) in enumerate(zip(candidate.params, theta, strict=True))},
+            candidate.name, candidate.variant, magnitude, sigma, candidate.unit, score, gain, q, False, shrink,
+            parameters={name: {"value": float(v), "sigma": float(math.sqrt(max(cov[i, i], 0.0)))}
+                        for i, (name, v) in enumerate(zip(candidate.params[:q], theta, strict=False))},
             aliases=aliases.of(candidate), g_shift=g_shift, d_shift=d_shift, cells=cells,
             injection=candidate.inject(theta, model)))
     if noise is not None and noise.name not in accepted_families:

@@ -105,7 +105,7 @@ def late_start(full: Record, ranked: Sequence[tuple[float, Candidate]], current:
         chi2 = profile(candidate, onsets)
         i = int(np.argmin(chi2))
         gain = chi2_current - float(chi2[i])
-        p = candidate.n_params
+        p = candidate.n_params_from_onset
         floor = float(chi2_dist.isf(alpha / tests, p))  # chi2 with p dof at each fixed onset
         passes = (gain > floor and gain - (p + 1) * log_n > 0.0
                   and gain - gain_from_start > onset_penalty * log_n)

@@ -101,9 +101,9 @@ def _family_fit(full: Record, candidates: Sequence[Candidate], grouping: Callabl
     index = [names.index(name) for name in member_names]
     without = [name for name in current if name not in member_names]
     gain = full.chi2(without) - chi2_family
-    p = len(member_names)
+    p = sum(c.n_params_at(full.onsets.get(c.key)) for c in family)
     extra_gain = chi2_final - chi2_family
-    stands = not missing or extra_gain > len(extra) * log_n
+    stands = not missing or extra_gain > sum(c.n_params_at(full.onsets.get(c.key)) for c in missing) * log_n
     return {"family": group, "variants": [c.key for c in family], "accepted_variants": [c.key for c in members],
             "magnitudes": theta[index].tolist(), "covariance": cov[np.ix_(index, index)].tolist(),
             "sigmas": np.sqrt(np.maximum(np.diag(cov)[index], 0.0)).tolist(), "n_params": p,

@@ -94,7 +94,7 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
                       if isinstance(item[2], Candidate)]
             late = late_start(full, ranked, current, chi2_current, nominal.n_candidates, options.alpha_candidates,
                               log_n, options.onset_penalty, late_columns)
-            late_score = -float("inf") if late is None else late.gain - (late.candidate.n_params + 1) * log_n
+            late_score = -float("inf") if late is None else late.gain - (late.candidate.n_params_from_onset + 1) * log_n
             if late is not None and (not passing or late_score > passing[0][0]):
                 passing = [(late_score, late.gain, late.candidate)]
             else:
