@@ -141,6 +141,8 @@ class CandidateContext:
     step_from_s: float | None = None
     ramp_from_s: float | None = None
     actuated: dict[tuple[float, float], np.ndarray] = field(default_factory=dict, compare=False, repr=False)
+    changes_log: list[dict[str, np.ndarray]] | None = field(default=None, compare=False, repr=False)
+    """Where given, each signature's data-side changes before the step mask (:mod:`.step_onset`)."""
 
     def actuated_torque(self, delay_s: float, time_constant_s: float) -> np.ndarray:
         """Mean thrust torque (n, 3) [N m] of the raw commands under a delay and a lag
@@ -353,6 +355,8 @@ def _centred_time(ctx: CandidateContext) -> np.ndarray:
 
 def _perturb(ctx: CandidateContext, **changes: np.ndarray) -> np.ndarray:
     """:func:`.channels.perturbation_channels` of data-side changes, zero before a step onset."""
+    if ctx.changes_log is not None:
+        ctx.changes_log.append({key: value for key, value in changes.items() if value is not None})
     if ctx.step_from_s is not None:
         on = (ctx.readouts.t_s >= ctx.step_from_s).astype(np.float64)
         changes = {key: value * on.reshape((-1,) + (1,) * (value.ndim - 1)) for key, value in changes.items()

@@ -56,6 +56,7 @@ __all__ = [
     "readouts_from_input",
     "startup_function",
     "torque_edges",
+    "zero_wrap",
 ]
 
 GROUPS = ("st", "torque", "ang_diff", "lin_common", "lin_diff")
@@ -308,14 +309,15 @@ def linearize(readouts: Readouts, model: NominalModel, g_angular: np.ndarray,
     channels[:, LIN_COMMON] = _prewhiten_common(common, model.srp_decay)
     channels[:, LIN_DIFF] = l_crf[:, 0] - l_crf[:, 1] - _coupling(m, w_mid, d_diff)
     edges = torque_edges(model, n)
-    _zero_wrap(channels, edges)
+    zero_wrap(channels, edges)
     ghat_pred = np.einsum("gij,nj->ngi", model.c_tmrf, predicted)
     lhat_pred = np.stack([_coupling(predicted, w_mid, d[g]) @ model.c_tmrf[g].T for g in range(2)], axis=1)
     return Linearization(g_angular, d, ghat, lhat, g_crf, l_crf, m, omega, w_mid, channels, predicted,
                          ghat_pred, lhat_pred, edges)
 
 
-def _zero_wrap(channels: np.ndarray, edges: tuple[int, int]) -> None:
+def zero_wrap(channels: np.ndarray, edges: tuple[int, int]) -> None:
+    """Zero, in place, the wrap samples of the channels with memory and the torque channel's edge samples."""
     channels[: WRAP_SAMPLES["st"], ST] = 0.0
     channels[: WRAP_SAMPLES["lin_common"], LIN_COMMON] = 0.0
     head, tail = edges
@@ -353,7 +355,7 @@ def perturbation_channels(lin: Linearization, model: NominalModel, dg: np.ndarra
         (n, 15) channel change (wrap samples zero).
     """
     n = lin.m.shape[0]
-    out = np.zeros((n, 15))
+    out = np.zeros((n, 15), order="F")  # channel-major: each channel's writes and DFT contiguous
     common = None
     diff = None
     if dg is not None:
@@ -379,7 +381,7 @@ def perturbation_channels(lin: Linearization, model: NominalModel, dg: np.ndarra
         out[:, LIN_COMMON] = _prewhiten_common(common, model.srp_decay)
     if diff is not None:
         out[:, LIN_DIFF] = diff
-    _zero_wrap(out, lin.torque_edges)
+    zero_wrap(out, lin.torque_edges)
     return out
 
 
@@ -449,7 +451,7 @@ def nuisance_column(lin: Linearization, model: NominalModel, name: str) -> np.nd
     """
     kind, *rest = name.split(".")
     n = lin.m.shape[0]
-    column = np.zeros((n, 15))
+    column = np.zeros((n, 15), order="F")
     if kind == "G":
         grs = int(rest[0]) - 1
         axis = ("phi", "theta", "psi").index(rest[1])
@@ -468,12 +470,12 @@ def nuisance_column(lin: Linearization, model: NominalModel, name: str) -> np.nd
         coupling = _coupling(lin.acc_pred, lin.w_mid, unit)
         column[:, LIN_COMMON] = _prewhiten_common(0.5 * coupling, model.srp_decay)
         column[:, LIN_DIFF] = coupling if grs == 0 else -coupling
-        _zero_wrap(column, lin.torque_edges)
+        zero_wrap(column, lin.torque_edges)
         return column
     if kind == "trend":
         index = CHANNELS.index(rest[0])
         column[:, index] = (np.arange(n) - 0.5 * (n - 1)) / max(n, 1)
-        _zero_wrap(column, lin.torque_edges)
+        zero_wrap(column, lin.torque_edges)
         return column
     if kind == "wrap":
         column[int(rest[1]), CHANNELS.index(rest[0])] = 1.0

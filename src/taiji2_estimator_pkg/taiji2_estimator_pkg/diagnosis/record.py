@@ -29,6 +29,7 @@ from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.locations import scan_keep
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 from taiji2_estimator_pkg.diagnosis.spectral import ConditionedFit, Design, NoiseSpectrum, Whitener, dft
+from taiji2_estimator_pkg.diagnosis.step_onset import StepPieces, step_pieces
 
 __all__ = ["Record", "RecordSettings", "calibrate", "column_fft", "fixed_change"]
 
@@ -58,9 +59,10 @@ class RecordSettings:
 def column_fft(column: np.ndarray, k_max: int) -> np.ndarray:
     """DFT (bins 1..k_max) of an (n, 15) column, transforming only its non-zero channels."""
     out = np.zeros((k_max, column.shape[1]), dtype=np.complex128)
-    used = np.flatnonzero(np.any(column != 0.0, axis=0))
+    rows = column.T  # channel-major: contiguous for the Fortran-ordered columns of .channels
+    used = np.flatnonzero(rows.any(axis=1))
     if used.size:
-        out[:, used] = dft(column[:, used], k_max)
+        out[:, used] = dft(rows[used].T, k_max)
     return out
 
 
@@ -396,13 +398,21 @@ class Record:
         -> column DFTs kept across calls by a caller whose variant's signature does not change meanwhile."""
         chi2 = np.empty(len(onsets_s))
         log_det = np.empty(len(onsets_s))
+        plain = candidate.key not in self.exact_secants and (candidate.series is None
+                                                               or self.secant.get(candidate.key) is None)
+        pieces: StepPieces | None | bool = None if plain else False  # built at the first onset not kept
         if fixed is None:
             fixed = self.design.conditioned(self.indices(others))  # the others' normal equations, factored once
         for i, onset in enumerate(onsets_s):
             key = (candidate.key, float(onset))
             ffts = None if columns is None else columns.get(key)
             if ffts is None:
-                ffts = self.column_ffts(candidate, float(onset))
+                if pieces is None:  # one build for every onset of the call (.step_onset)
+                    pieces = step_pieces(candidate, self.ctx) or False
+                if pieces:
+                    ffts = [column_fft(column, self.k_max) for column in pieces.columns_at(float(onset))]
+                else:
+                    ffts = self.column_ffts(candidate, float(onset))
                 if columns is not None:
                     columns[key] = ffts
             _, cov, chi2[i] = fixed.add(self.whitener, ffts)

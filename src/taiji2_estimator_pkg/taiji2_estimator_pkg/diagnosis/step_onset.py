@@ -1,0 +1,79 @@
+"""A step-onset signature at many trial onsets from one build of it.
+
+A variant's columns from a step onset tau are ``P(x * on_tau)``: the data-side changes x its signature
+builds, zero before tau, through :func:`.channels.perturbation_channels` P. P is linear, and its memory
+is two samples (the star tracker's second difference, the half-sum of the mean angular acceleration,
+the prewhitening of the common channel). So
+
+    P(x * on_tau) = on_tau * P(x) + E_tau,
+
+with E_tau non-zero only on the first two samples from tau, and computed exactly from x on the four
+samples around tau. The onset profile (:meth:`.record.Record.onset_profile`) then builds the signature
+once, from the start, and each trial onset costs a copy and a DFT instead of a build (the build is
+3/4 of an onset's cost for a GRS cross-coupling: ~40 of ~50 ms at 3 h, 10 Hz).
+
+Only for the variants whose columns are each one ``_perturb`` of :mod:`.candidates` (checked: one
+logged change per column); the timing candidates (knots, exact) and the ramps are built at each onset.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from taiji2_estimator_pkg.diagnosis.candidates import Candidate, CandidateContext
+from taiji2_estimator_pkg.diagnosis.channels import perturbation_channels, zero_wrap
+
+__all__ = ["MEMORY_SAMPLES", "StepPieces", "step_pieces"]
+
+MEMORY_SAMPLES = 2
+"""Samples of memory of :func:`.channels.perturbation_channels`: an output row reads the changes of its own
+sample and of the two before it."""
+
+
+@dataclass(frozen=True)
+class StepPieces:
+    """A signature built from the start (``columns``) and the data-side changes behind each column."""
+
+    ctx: CandidateContext
+    columns: list[np.ndarray]
+    changes: list[dict[str, np.ndarray]]
+
+    def columns_at(self, onset_s: float) -> list[np.ndarray]:
+        """(n, 15) columns from a step at ``onset_s`` [s] (data clock): equal to the build at that onset."""
+        t = self.ctx.readouts.t_s
+        n = t.shape[0]
+        i = int(np.searchsorted(t, onset_s, side="left"))  # first sample with t >= onset
+        lo, hi = max(i - MEMORY_SAMPLES, 0), min(i + MEMORY_SAMPLES, n)
+        on = (t[lo:hi] >= onset_s).astype(np.float64)
+        lin = replace(self.ctx.lin, m=self.ctx.lin.m[lo:hi], torque_edges=(0, 0))
+        out = []
+        for column, changes in zip(self.columns, self.changes, strict=True):
+            moved = column.copy()
+            moved[:i] = 0.0
+            if lo < hi:
+                window = {key: value[lo:hi] for key, value in changes.items()}
+                masked = {key: value * on.reshape((-1,) + (1,) * (value.ndim - 1)) for key, value in window.items()}
+                # E_tau: the rows whose memory straddles the onset (window-local wrap rows are zero in both)
+                moved[lo:hi] += (perturbation_channels(lin, self.ctx.model, **masked)
+                                 - on[:, None] * perturbation_channels(lin, self.ctx.model, **window))
+                zero_wrap(moved, self.ctx.lin.torque_edges)
+            out.append(moved)
+        return out
+
+
+def step_pieces(candidate: Candidate, ctx: CandidateContext) -> StepPieces | None:
+    """The candidate's pieces from the start (``ctx`` without an onset), or None where its columns are not
+    each one logged change (then build it at each onset)."""
+    if candidate.onset_kind != "step":
+        return None
+    t = ctx.readouts.t_s
+    if not t.shape[0]:
+        return None
+    log: list[dict[str, np.ndarray]] = []
+    # a step at the first sample: every change on, and a step-only parameter's column built (Candidate.step_params)
+    columns = candidate.build(replace(ctx.at_onset("step", float(t[0])), changes_log=log))
+    if len(log) != len(columns):
+        return None
+    return StepPieces(ctx, columns, log)
