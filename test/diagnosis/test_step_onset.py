@@ -10,9 +10,11 @@ from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_bat
 from taiji2_estimator_pkg.diagnosis import NominalModel, candidate_catalog, prepare_input
 from taiji2_estimator_pkg.diagnosis.candidates import CandidateContext
 from taiji2_estimator_pkg.diagnosis.channels import linearize, readouts_from_input
+from taiji2_estimator_pkg.diagnosis.record import column_fft
 from taiji2_estimator_pkg.diagnosis.step_onset import step_pieces
 
 N_SAMPLES = 6000  # 10 min at 10 Hz
+K_MAX = 120  # bins 1..120: up to 0.2 Hz
 
 
 @pytest.fixture(scope="module")
@@ -41,9 +43,15 @@ def test_every_step_variant_from_one_build_equals_its_build_at_each_onset(contex
         covered.add(candidate.name)
         for onset in onsets:
             built = candidate.build(context.at_onset("step", float(onset)))
-            for fast, direct in zip(pieces.columns_at(float(onset)), built, strict=True):
+            columns = pieces.columns_at(float(onset))
+            spectra = pieces.ffts_at(float(onset), K_MAX)
+            for fast, spectrum, direct in zip(columns, spectra, built, strict=True):
                 scale = max(float(np.max(np.abs(direct))), 1e-300)
                 np.testing.assert_allclose(fast, direct, rtol=0.0, atol=1e-12 * scale,
                                            err_msg=f"{candidate.key} from {onset} s")
+                expected = column_fft(direct, K_MAX)
+                np.testing.assert_allclose(spectrum, expected, rtol=0.0,
+                                           atol=1e-12 * max(float(np.max(np.abs(expected))), 1e-300),
+                                           err_msg=f"{candidate.key} from {onset} s, DFT")
     assert {"cross_coupling", "thruster_torque_gain", "gravity_gradient", "inertia_error", "tm_stiffness",
             "thruster_force_leakage", "time_offset"} <= covered

@@ -46,6 +46,7 @@ __all__ = [
     "GROUPS",
     "N_CHANNELS",
     "TIMING_REACH_S",
+    "WRAP_SAMPLES",
     "Linearization",
     "Readouts",
     "actuated_torque",

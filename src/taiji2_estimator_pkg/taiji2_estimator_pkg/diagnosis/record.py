@@ -410,7 +410,7 @@ class Record:
                 if pieces is None:  # one build for every onset of the call (.step_onset)
                     pieces = step_pieces(candidate, self.ctx) or False
                 if pieces:
-                    ffts = [column_fft(column, self.k_max) for column in pieces.columns_at(float(onset))]
+                    ffts = pieces.ffts_at(float(onset), self.k_max)
                 else:
                     ffts = self.column_ffts(candidate, float(onset))
                 if columns is not None:

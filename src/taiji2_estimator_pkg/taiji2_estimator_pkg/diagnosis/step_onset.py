@@ -9,8 +9,9 @@ the prewhitening of the common channel). So
 
 with E_tau non-zero only on the first two samples from tau, and computed exactly from x on the four
 samples around tau. The onset profile (:meth:`.record.Record.onset_profile`) then builds the signature
-once, from the start, and each trial onset costs a copy and a DFT instead of a build (the build is
-3/4 of an onset's cost for a GRS cross-coupling: ~40 of ~50 ms at 3 h, 10 Hz).
+once, from the start, and each trial onset costs a copy and a DFT of the channels the signature uses
+instead of a build (the build was 3/4 of an onset's cost for a GRS cross-coupling: ~40 of ~50 ms at 3 h,
+10 Hz).
 
 Only for the variants whose columns are each one ``_perturb`` of :mod:`.candidates` (checked: one
 logged change per column); the timing candidates (knots, exact) and the ramps are built at each onset.
@@ -23,7 +24,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, CandidateContext
-from taiji2_estimator_pkg.diagnosis.channels import perturbation_channels, zero_wrap
+from taiji2_estimator_pkg.diagnosis.channels import WRAP_SAMPLES, perturbation_channels, zero_wrap
+from taiji2_estimator_pkg.diagnosis.spectral import dft
 
 __all__ = ["MEMORY_SAMPLES", "StepPieces", "step_pieces"]
 
@@ -42,25 +44,55 @@ class StepPieces:
 
     def columns_at(self, onset_s: float) -> list[np.ndarray]:
         """(n, 15) columns from a step at ``onset_s`` [s] (data clock): equal to the build at that onset."""
+        i, lo, boundary = self._boundary(onset_s)
+        out = []
+        for column, rows in zip(self.columns, boundary, strict=True):
+            moved = column.copy()
+            moved[:i] = 0.0
+            moved[lo:lo + rows.shape[0]] += rows
+            out.append(moved)
+        return out
+
+    def ffts_at(self, onset_s: float, k_max: int) -> list[np.ndarray]:
+        """(k_max, 15) DFTs (bins 1..k_max, :func:`.spectral.dft`) of :meth:`columns_at`, each channel that is
+        zero throughout neither copied nor transformed."""
+        i, lo, boundary = self._boundary(onset_s)
+        out = []
+        for column, rows in zip(self.columns, boundary, strict=True):
+            used = np.flatnonzero(column.T.any(axis=1) | rows.T.any(axis=1))
+            spectrum = np.zeros((k_max, column.shape[1]), dtype=np.complex128)
+            if used.size:
+                moved = column.T[used]  # (u, n) channel-major copy
+                moved[:, :i] = 0.0
+                moved[:, lo:lo + rows.shape[0]] += rows.T[used]
+                spectrum[:, used] = dft(moved.T, k_max)
+            out.append(spectrum)
+        return out
+
+    def _boundary(self, onset_s: float) -> tuple[int, int, list[np.ndarray]]:
+        """(i, lo, E rows): the first sample from the onset, the first row of the boundary window and each
+        column's E_tau on it (rows lo .. lo + 3, the window-local wrap rows zero in both terms)."""
         t = self.ctx.readouts.t_s
         n = t.shape[0]
         i = int(np.searchsorted(t, onset_s, side="left"))  # first sample with t >= onset
         lo, hi = max(i - MEMORY_SAMPLES, 0), min(i + MEMORY_SAMPLES, n)
         on = (t[lo:hi] >= onset_s).astype(np.float64)
         lin = replace(self.ctx.lin, m=self.ctx.lin.m[lo:hi], torque_edges=(0, 0))
-        out = []
-        for column, changes in zip(self.columns, self.changes, strict=True):
-            moved = column.copy()
-            moved[:i] = 0.0
-            if lo < hi:
-                window = {key: value[lo:hi] for key, value in changes.items()}
-                masked = {key: value * on.reshape((-1,) + (1,) * (value.ndim - 1)) for key, value in window.items()}
-                # E_tau: the rows whose memory straddles the onset (window-local wrap rows are zero in both)
-                moved[lo:hi] += (perturbation_channels(lin, self.ctx.model, **masked)
-                                 - on[:, None] * perturbation_channels(lin, self.ctx.model, **window))
-                zero_wrap(moved, self.ctx.lin.torque_edges)
-            out.append(moved)
-        return out
+        head, tail = self.ctx.lin.torque_edges
+        near_edge = lo < max(head, *WRAP_SAMPLES.values()) or hi > n - tail
+        boundary = []
+        for changes in self.changes:
+            window = {key: value[lo:hi] for key, value in changes.items()}
+            masked = {key: value * on.reshape((-1,) + (1,) * (value.ndim - 1)) for key, value in window.items()}
+            rows = (perturbation_channels(lin, self.ctx.model, **masked)
+                    - on[:, None] * perturbation_channels(lin, self.ctx.model, **window))
+            if near_edge:  # the record's own wrap and edge samples stay zero
+                whole = np.zeros((n, rows.shape[1]))
+                whole[lo:hi] = rows
+                zero_wrap(whole, self.ctx.lin.torque_edges)
+                rows = whole[lo:hi]
+            boundary.append(rows)
+        return i, lo, boundary
 
 
 def step_pieces(candidate: Candidate, ctx: CandidateContext) -> StepPieces | None:
