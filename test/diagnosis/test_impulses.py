@@ -11,7 +11,7 @@ import pytest
 from scipy.stats import binom
 
 from taiji2_estimator_pkg.diagnosis.engine import diagnose
-from taiji2_estimator_pkg.diagnosis.impulses import FALSE_ALARM_PER_RECORD, detect_impulses
+from taiji2_estimator_pkg.diagnosis.impulses import EDGE_GUARD_S, FALSE_ALARM_PER_RECORD, detect_impulses, search_input
 from taiji2_estimator_pkg.diagnosis.inputs import prepare_input
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 from taiji2_model.config import load_config
@@ -60,6 +60,22 @@ def test_an_snr_8_impulse_is_found_at_its_sample(model):
         events = detect_impulses(residual, None, model, t_s, keep).events
         found += any(e.index == k and abs(e.time_s - (t_s[k] - 0.05)) < 1e-9 for e in events)
     assert found >= 45, found
+
+
+def test_a_modelled_step_is_not_searched_for_an_impulse(model):
+    """A large SNR-20 spike at a modelled step onset (the step's transient through the readout chain) is not
+    reported; the same spike 10 s later is."""
+    rng = np.random.default_rng(9)
+    t_s = 0.1 * np.arange(1, N + 1)
+    commands = np.zeros((N, 3))  # no command changes: only the modelled step guards
+    for offset_s, expected in ((0.0, False), (10.0, True)):
+        residual = _white(rng)
+        k = 1000 + round(offset_s / 0.1)
+        residual[k, 3:6] += 20.0 * SIGMA_TORQUE
+        searched, keep = search_input(residual, commands, (0, 0), None, 0.1, t_s, [t_s[1000]])
+        assert not keep[1000 - round(EDGE_GUARD_S / 0.1):1000 + round(EDGE_GUARD_S / 0.1) + 1].any()
+        events = detect_impulses(searched, None, model, t_s, keep).events
+        assert any(e.index == k for e in events) == expected
 
 
 def test_an_impulse_in_simulated_data_is_named_fitted_and_left_out_of_the_calibration():

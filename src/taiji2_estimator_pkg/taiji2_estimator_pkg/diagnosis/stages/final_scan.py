@@ -94,7 +94,10 @@ def _impulses(inp: DiagnosisInput, full: Record, current: Sequence[str], theta: 
     """Search the final residual for impulsive events; the columns of the final fit with theirs added, and the
     chain's response fitted with the residual searched."""
     residual, response = full.response(current, theta)
-    searched, keep = search_input(residual, inp.torque_cmd_n_m, full.lin.torque_edges, inp.filled, full.model.dt_s)
+    steps = [onset for key, onset in full.onsets.items()
+             if key in full.candidates and full.candidates[key].onset_kind == "step"]
+    searched, keep = search_input(residual, inp.torque_cmd_n_m, full.lin.torque_edges, inp.filled, full.model.dt_s,
+                                  inp.t_s, steps)
     impulses = detect_impulses(searched, response, full.model, inp.t_s, keep)
     columns = list(current)
     for event in impulses.events:
