@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from taiji2_model.config import load_config
-from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 from taiji2_estimator_pkg.diagnosis import NominalModel, candidate_catalog, prepare_input
 from taiji2_estimator_pkg.diagnosis.candidates import CandidateContext
 from taiji2_estimator_pkg.diagnosis.channels import linearize, readouts_from_input
 from taiji2_estimator_pkg.diagnosis.record import column_fft
 from taiji2_estimator_pkg.diagnosis.step_onset import step_pieces
+from taiji2_model.config import load_config
+from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
 
 N_SAMPLES = 6000  # 10 min at 10 Hz
 K_MAX = 120  # bins 1..120: up to 0.2 Hz

@@ -3,13 +3,14 @@
 Length (over 600 lines): the one table of signatures below and the factory of each variant it lists, side by
 side, so that a signature and its code are read and changed together.
 
-Every catalog effect (:mod:`taiji2_model.effect_catalog`) is split into *variants*, one per
-GRS / axis / readout it can act on, each with one parameter (the gravity gradient: the quadrature
-pair of its 2n harmonic, and its mean, seen only where it starts mid-run), in the SI unit of the simulator's parameter, so that a fitted
-magnitude can be compared with an injected one. A variant's columns are the first-order change
-of the 15 channels per unit parameter, derived from the calibrated data at the linearization
-point (:func:`.channels.perturbation_channels`). The star-tracker low-frequency noise is a noise
-candidate: it changes the channel spectrum, not the residual (:class:`NoiseCandidate`).
+Every catalog effect (:mod:`taiji2_model.effect_catalog`) is split into *variants*, one per GRS /
+axis / readout it can act on, each with one parameter (the gravity gradient: the quadrature pair of
+its 2n harmonic, and its mean, seen only where it starts mid-run), in the SI unit of the simulator's
+parameter, so that a fitted magnitude can be compared with an injected one. A variant's columns are
+the first-order change of the 15 channels per unit parameter, derived from the calibrated data at
+the linearization point (:func:`.channels.perturbation_channels`). The star-tracker low-frequency
+noise is a noise candidate: it changes the channel spectrum, not the residual
+(:class:`NoiseCandidate`).
 
 Signatures (data side, per unit magnitude; ``^pred`` = predicted from the commanded torque,
 ``^data`` = calibrated measurement; ``tc = t - t_mid``):

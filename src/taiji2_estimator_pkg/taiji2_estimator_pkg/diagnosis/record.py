@@ -400,7 +400,7 @@ class Record:
         log_det = np.empty(len(onsets_s))
         plain = candidate.key not in self.exact_secants and (candidate.series is None
                                                                or self.secant.get(candidate.key) is None)
-        pieces: StepPieces | None | bool = None if plain else False  # built at the first onset not kept
+        pieces: StepPieces | bool | None = None if plain else False  # built at the first onset not kept
         if fixed is None:
             fixed = self.design.conditioned(self.indices(others))  # the others' normal equations, factored once
         for i, onset in enumerate(onsets_s):

@@ -89,7 +89,7 @@ def dft(x: np.ndarray, k_max: int | None = None) -> np.ndarray:
     # p-th decimated series; L >= 2 top + 1 so that rfft gives Y_p[1..top] (P x fewer bins computed)
     rows = np.moveaxis(x.reshape(n, -1), 0, -1)  # (c, n): a view, contiguous for an (n, c) Fortran column
     y = np.fft.rfft(rows.reshape(rows.shape[0], length, count).transpose(0, 2, 1), axis=-1)[..., 1:top + 1]
-    return np.einsum("cpk,kp->kc", y, twiddle).reshape((top,) + x.shape[1:])
+    return np.einsum("cpk,kp->kc", y, twiddle).reshape((top, *x.shape[1:]))
 
 
 @functools.lru_cache(maxsize=8)
