@@ -567,11 +567,12 @@ def _gravity_gradient(axis: int, orbit_period_s: float) -> Candidate:
         start = ctx.readouts.t_s - ctx.readouts.dt_s  # torque held over the step from its start
         columns = []
         for wave in (np.cos, np.sin, np.ones_like):
+            if wave is np.ones_like and ctx.step_from_s is None:  # the mean from the start: the dropped DC bin
+                columns.append(np.zeros_like(columns[0]))  # (Candidate.step_params), not built
+                continue
             torque = np.zeros((start.shape[0], 3))
             torque[:, axis] = wave(2.0 * rate * start)
             columns.append(_torque_column(ctx, torque))
-        if ctx.step_from_s is None:  # the mean from the start: the dropped DC bin (Candidate.step_params)
-            columns[-1] = np.zeros_like(columns[-1])
         return columns
 
     def inject(theta: np.ndarray, model: NominalModel) -> dict[str, Any]:
