@@ -71,7 +71,7 @@ def test_latency_and_lag_are_fitted_jointly():
     paper's preset leaves the GRS range, and clipped samples are transients of their own): the delay and
     lag signatures are exact only jointly. Fitted side by side (3 h), the split came out 0.052 / 0.148 s
     +- 0.006 s (11 sigma off) with a residual of significance 408 at torque_z 0.3-1 Hz; the joint
-    fit (stages.final_scan._joint_timing) finds the split within its sigma. Checks (seeded, 3 sigma): no
+    fit (diagnosis.joint_timing) finds the split within its sigma. Checks (seeded, 3 sigma): no
     physical effect named, latency and lag each within 3 sigma of the truth, and the residual left
     at the torque channels at most 2 % of that of the side-by-side fit at 3 h (in -log10 p; 3.5 measured at
     1 h, where the side-by-side residual would be ~1/3 of 408: still 17 times the bound). 1 h instead of the
@@ -91,6 +91,31 @@ def test_latency_and_lag_are_fitted_jointly():
     assert all(loc["significance"] < 8.16 for loc in result.verdict["remaining"]
                if loc["channel"].startswith("torque")), result.verdict["remaining"]
     _assert_corrected(result, data_config)
+
+
+def test_a_lag_beside_a_delay_is_selected_on_the_torque_high_band():
+    """A 73-ms latency with a 103-ms thruster lag (reference fidelity, 1 h, readout unclipped). Below the fit
+    band's top (0.2 Hz) the pair and a 176-ms delay alone are nearly the same; the lag was scored there only,
+    tied with a GRS stamp offset, and a 3-h set was named "actuation delay + GRS time offset" with a 0.3-1 Hz
+    torque gap. The selection now scores a lag beside an accepted delay jointly, with the torque channels up to
+    2 Hz (diagnosis.joint_timing). Checks (seeded, 3 sigma): the lag and the delay named, no other delay
+    family, each within 3 sigma of the truth, nothing unexplained; and the selection step that took the lag gave
+    it at least 3 times the gain of the GRS stamp offset (fit band only, the two tied: 57.6 and 57.7 at 3 h)."""
+    data_config = load_config("type1", {"timing.actuation_latency_s": 0.073, "timing.thruster_time_constant_s": 0.103,
+                                        "grs.readout_saturation": False})
+    commands = maneuver_torque_commands(data_config, HOUR)
+    out = simulate_reference(data_config, 46, commands)
+    inp = prepare_input(out.t_s, out.st_quat_xyzw, out.voltages_v, commands, data_config.sample_rate_hz)
+    result = diagnose(inp, load_config("type1"))
+    named = {e.name: e for e in result.effects if e.accepted}
+    assert set(named) == {"actuation_delay", "thruster_response"}, result.verdict["summary"]
+    delay, lag = named["actuation_delay"], named["thruster_response"]
+    assert abs(delay.magnitude - 0.073) < 3.0 * delay.sigma
+    assert abs(lag.magnitude - 0.103) < 3.0 * lag.sigma
+    assert not result.verdict["unexplained"], result.verdict["summary"]
+    step = next(s for s in result.steps if s["accepted"] == "thruster_response")
+    stamp = next((t["delta_chi2"] for t in step["top"] if t["candidate"] == "grs_time_offset"), 0.0)
+    assert step["delta_chi2"] > 3.0 * stamp, step
 
 
 @pytest.mark.long  # CI time (37 s): test_diagnose.py's time_offset case names a GRS time offset in CI

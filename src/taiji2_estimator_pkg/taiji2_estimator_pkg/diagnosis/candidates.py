@@ -128,7 +128,7 @@ class CandidateContext:
         Fitted timing the actuation signatures are conditioned on, beyond the model's:
         ``"delay_s"`` and ``"time_constant_s"`` (default 0). A delay's signature is then
         ``tau_act(D0 + d + tau, T0 + t) - tau_act(D0 + d, T0 + t)``, exact jointly with the lag ``t``
-        fitted beside it (see ``stages.final_scan._joint_timing``).
+        fitted beside it (see ``diagnosis.joint_timing``).
     """
 
     lin: Linearization

@@ -1,7 +1,7 @@
 """Stage 4, final scan: the final model with every accepted effect, its residual scanned, the verdict.
 
 The final magnitudes of second-order signatures are refitted with every effect in, an accepted
-thruster lag and delay fitted jointly (:func:`_joint_timing`); the verdict is "unexplained" when,
+thruster lag and delay fitted jointly (:mod:`..joint_timing`); the verdict is "unexplained" when,
 with the accepted effects modelled, a fresh scan finds a significant location or a strong location
 of the nominal model is still open (tested over those locations only).
 """
@@ -14,12 +14,18 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.dynamics import ResponseFit
 from taiji2_estimator_pkg.diagnosis.impulses import Impulses, detect_impulses, impulse_candidate, search_input
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
+from taiji2_estimator_pkg.diagnosis.joint_timing import (
+    LAG_FAMILY,
+    apply_joint_timing,
+    fit_joint_timing,
+    high_band,
+    joint_partner,
+)
 from taiji2_estimator_pkg.diagnosis.locations import Location
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
@@ -68,11 +74,15 @@ def final_scan(inp: DiagnosisInput, nominal: Nominal, where: Where, selection: S
                say: Progress) -> FinalModel:
     """Fit the final model (refining its signatures in ``nominal.full``), scan it, state the verdict."""
     full, accepted, current = nominal.full, selection.accepted, selection.current
+    lag = next((c for c in accepted if isinstance(c, Candidate) and c.name == LAG_FAMILY), None)
+    pair = None if lag is None else joint_partner(lag, accepted, full)
     for candidate in accepted:  # the final magnitudes of second-order signatures, with every effect in
-        if isinstance(candidate, Candidate) and candidate.series is not None:
+        if isinstance(candidate, Candidate) and candidate.series is not None and candidate not in (pair or ()):
             names = candidate.column_names()
             full.refine(candidate, [name for name in current if name not in names])
-    _joint_timing(full, [c for c in accepted if isinstance(c, Candidate)], current)
+    if pair is not None:  # the thruster lag and a delay: their exact joint signature (..joint_timing)
+        high = high_band(full, current, full.fit(current)[0], pair)
+        apply_joint_timing(full, fit_joint_timing(full, *pair, current, high))
     theta_final, cov_final, chi2_final = full.fit(current)
     current, impulses, response = _impulses(inp, full, current, theta_final, say)
     theta_scan = theta_final
@@ -177,62 +187,3 @@ def describe_locations(locations: Sequence[Location] | Sequence[dict[str, Any]])
         parts.append(f"{item['channel']} {lo:.2g}-{hi:.2g} Hz ({item['kind']}"
                      + (f", {item['segment']}, {item['view']}" if "segment" in item else "") + window + ")")
     return "; ".join(parts)
-
-
-_DELAY_FAMILIES = ("actuation_delay", "grs_time_offset")
-_RIDGE_LAGS_S = (0.0, 0.025, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3)  # starting splits of the group delay [s]
-
-
-def _joint_timing(full: Record, accepted: Sequence[Candidate], current: Sequence[str]) -> None:
-    """Fit an accepted thruster lag and an accepted delay jointly, with their exact joint signature.
-
-    The thrust under a delay and a lag together is not the sum of the thrust under each, and the
-    data fix their sum (the group delay) to a fraction of a millisecond but their split only to
-    ~20 ms: fitted side by side, each signature exact only at the other's model value, a
-    second-order residual stays where the thrust changes (torque channels, 0.3-5 Hz), and
-    alternating one-parameter fits crawl along the ridge. So (delay, lag) are fitted together by
-    a simplex over the exact channel change ``tau_act(D0 + delay, T0 + lag) - tau_act(D0, T0)``
-    (every other column refitted linearly), started from the best of a few splits of the fitted
-    group delay. Then the lag's column is its exact secant at the fitted lag and the delay's its
-    exact secant conditioned on that lag: the two sum exactly to the joint change at the fitted pair.
-    """
-    lag = next((c for c in accepted if c.name == "thruster_response"), None)
-    delays = [c for c in accepted if c.name in _DELAY_FAMILIES]
-    if lag is None or not delays or lag.exact is None:
-        return
-    delay = max(delays, key=lambda c: abs(full.secant.get(c.key, 0.0)))
-    if delay.exact is None or lag.key in full.onsets or delay.key in full.onsets:
-        return  # an onset: the joint signature from the start does not apply (each is fitted alone)
-    free = [name for name in current if name not in delay.column_names() + lag.column_names()]
-    t0 = full.model.time_constant_s
-    args = (full, delay, lag, free)
-    group = full.secant.get(delay.key, 0.0) + full.secant.get(lag.key, 0.0)
-    starts = [np.array([group - t, t]) for t in sorted({*_RIDGE_LAGS_S, full.secant.get(lag.key, 0.0)})
-              if t + t0 >= 0.0]
-    start = min(starts, key=lambda x: _joint_chi2(x, *args))
-    simplex = start + np.array([[0.0, 0.0], [0.01, 0.0], [-0.01, 0.01]])
-    best = minimize(_joint_chi2, start, args=args, method="Nelder-Mead",
-                    options={"initial_simplex": simplex, "xatol": 2e-5, "fatol": 1e-3, "maxfev": 120})
-    delay_s, lag_s = float(best.x[0]), max(float(best.x[1]), -t0)
-    delay_change, lag_change = _timing_changes(full, delay, lag, delay_s, lag_s)
-    full.set_exact_secant(lag, lag_s, lag_change)
-    full.set_exact_secant(delay, delay_s, delay_change)
-
-
-def _timing_changes(full: Record, delay: Candidate, lag: Candidate, delay_s: float, lag_s: float
-                    ) -> tuple[np.ndarray, np.ndarray]:
-    """The exact channel changes of (delay, lag): the lag's alone, the delay's at that lag."""
-    ctx = full.ctx
-    lag_s = max(lag_s, -full.model.time_constant_s)
-    ctx.timing_base.clear()
-    lag_change = lag.exact(ctx, lag_s)
-    ctx.timing_base["time_constant_s"] = lag_s
-    delay_change = delay.exact(ctx, delay_s)
-    ctx.timing_base.clear()
-    return delay_change, lag_change
-
-
-def _joint_chi2(x: np.ndarray, full: Record, delay: Candidate, lag: Candidate, free: Sequence[str]) -> float:
-    """chi2 with the joint change of (delay, lag) = ``x`` [s] and the ``free`` columns refitted."""
-    delay_change, lag_change = _timing_changes(full, delay, lag, float(x[0]), float(x[1]))
-    return full.chi2_with_column(free, delay_change + lag_change)

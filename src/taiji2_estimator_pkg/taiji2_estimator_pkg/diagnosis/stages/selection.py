@@ -5,7 +5,10 @@ the nuisance terms; its likelihood gain is ``delta chi^2`` (``2 delta log L`` fo
 candidate), its score ``delta chi^2 - p ln N`` (BIC). The best variant is accepted while its score
 is positive and its gain passes a Bonferroni floor over the candidates; at most
 ``options.max_effects`` physical effects (timing effects, each timing family at most once, do not
-count). An accepted effect's second-order signature is relinearised at its fitted magnitude, and
+count). Of the two delay families (an actuation delay, a GRS stamp offset) one at most is accepted
+from the start. A thruster lag beside an accepted delay (or a delay beside an accepted lag) is scored by
+their joint exact fit (:mod:`..joint_timing`). An accepted effect's second-order signature is
+relinearised at its fitted magnitude, and
 its onset is modelled when the profile likelihood over the onset says it starts mid-run
 (:mod:`..onset`). At each step the leading variants are also tried from a few onsets on
 (:mod:`.late_start`): an effect that starts mid-run reads weak from the start, and drifts fit it
@@ -18,6 +21,14 @@ from dataclasses import dataclass
 from typing import Any
 
 from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES, Candidate, NoiseCandidate
+from taiji2_estimator_pkg.diagnosis.joint_timing import (
+    DELAY_FAMILIES,
+    JointTiming,
+    apply_joint_timing,
+    fit_joint_timing,
+    high_band,
+    joint_partner,
+)
 from taiji2_estimator_pkg.diagnosis.onset import onset_posterior
 from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
 from taiji2_estimator_pkg.diagnosis.stages.late_start import late_start
@@ -66,14 +77,29 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
     current = list(nominal.nuisance)
     _, _, chi2_current = full.fit(current)
     steps: list[dict[str, Any]] = []
+    joint_starts: dict[str, tuple[float, float]] = {}  # the last joint (delay, lag) fit per candidate
     late_columns: dict = {}  # the late-start look's column DFTs, built once per selection (.late_start)
     for step in range(options.max_effects + len(TIMING_FAMILIES)):
         evaluations: list[tuple[float, float, Candidate | NoiseCandidate]] = []
+        joints: dict[str, JointTiming] = {}
         physical_full = _physical_count(accepted) >= options.max_effects
+        # a delay accepted from the start: the other delay family would add to it only the star tracker's
+        # offset (a GRS stamp offset is a delay with the star tracker stamped early, .candidates), which
+        # time_offset is, and its delay part stacked linearly on the first fights the joint timing fit
+        delay_from_start = any(isinstance(c, Candidate) and c.name in DELAY_FAMILIES and c.key not in full.onsets
+                               for c in accepted)
         for candidate in candidates:
-            if candidate in accepted or (physical_full and not candidate.is_timing):
+            if candidate in accepted or (physical_full and not candidate.is_timing) or \
+                    (candidate.name in DELAY_FAMILIES and delay_from_start):
                 continue
-            if candidate.series is not None:  # polynomial signature: its exact (series) gain
+            pair = joint_partner(candidate, accepted, full)
+            if pair is not None:  # a lag beside an accepted delay, or the reverse: their joint exact gain,
+                # the torque channels above the fit band included (..joint_timing)
+                high = high_band(full, current, full.fit(current)[0], pair)
+                joints[candidate.key] = fit_joint_timing(full, *pair, current, high, joint_starts.get(candidate.key))
+                joint_starts[candidate.key] = (joints[candidate.key].delay_s, joints[candidate.key].lag_s)
+                chi2_new = joints[candidate.key].chi2 - (0.0 if high is None else high.current)
+            elif candidate.series is not None:  # polynomial signature: its exact (series) gain
                 _, chi2_new = full.series_fit(candidate, current)
             else:
                 chi2_new = full.chi2(current + candidate.column_names())
@@ -115,7 +141,10 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
             noise_fit = {"kappa": noise_step[0], "gain": noise_step[1], "sigma": noise_step[2]}
             full.rebuild(noise_step[0])
         elif isinstance(best, Candidate):
-            full.refine(best, current)  # second-order signatures: relinearise at the fitted magnitude
+            if best.key in joints:  # both columns become exact secants at the jointly fitted pair
+                apply_joint_timing(full, joints[best.key])
+            else:  # second-order signatures: relinearise at the fitted magnitude
+                full.refine(best, current)
             if options.onsets:  # does it start mid-run? (profile likelihood over its onset, .onset)
                 info = onset_posterior(full, best, current)
                 info["modelled"] = bool(info["delta_chi2"] > options.onset_penalty * log_n)
