@@ -20,7 +20,9 @@ the objective adds the torque channels' chi-square from the fit band's top to
 (:class:`HighBand`; the other columns held at their fit, which the fit band fixes). On a 3-h
 reference set (a 73-ms delay and a 103-ms lag) the fit band alone scores the pair against a
 176-ms delay at delta chi2 57, the same as a GRS stamp offset that leaves a 0.3-1 Hz torque gap;
-the high band gives the lag delta chi2 ~ 690 and the split within 4 ms of the truth.
+the high band gives the lag delta chi2 ~ 690 and the split within 4 ms of the truth. The high band
+scores the selection only: the final fit refits every column linearly on the fit band, which would
+move a high-band split along the ridge, so the final joint fit is on the fit band as well.
 :func:`apply_joint_timing` then makes the lag's column its exact secant at the fitted lag and
 the delay's its exact secant conditioned on that lag: the two sum exactly to the joint change at
 the fitted pair.
