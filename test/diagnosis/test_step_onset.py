@@ -55,3 +55,23 @@ def test_every_step_variant_from_one_build_equals_its_build_at_each_onset(contex
                                            err_msg=f"{candidate.key} from {onset} s, DFT")
     assert {"cross_coupling", "thruster_torque_gain", "gravity_gradient", "inertia_error", "tm_stiffness",
             "thruster_force_leakage", "time_offset"} <= covered
+
+
+def test_a_relinearised_series_signature_from_one_build_equals_its_build_at_each_onset(context):
+    """The nonlinearity relinearised at a k (its column a weighted sum of its series terms, each one change):
+    the pieces of that sum give its columns at every onset, to rounding; a timing (knot) signature has none."""
+    t = context.readouts.t_s
+    onsets = [t[0], t[2] - 0.03, 0.5 * (t[100] + t[101]), t[3000], t[-1]]
+    catalog = {c.key: c for c in candidate_catalog()[0]}
+    for key, k in (("readout_nonlinearity[grs1.z]", 2e6), ("readout_nonlinearity[grs2.phi]", -3e6)):
+        candidate = catalog[key]
+        weights = candidate.coefficients(k) / k  # the secant's weights (Record.relinearise)
+        pieces = step_pieces(candidate, context, weights)
+        assert pieces is not None
+        for onset in onsets:
+            direct = candidate.series_sum(context.at_onset("step", float(onset)), weights)
+            (fast,) = pieces.columns_at(float(onset))
+            np.testing.assert_allclose(fast, direct, rtol=0.0, atol=1e-12 * float(np.max(np.abs(direct))),
+                                       err_msg=f"{key} from {onset} s")
+    delay = catalog["grs_time_offset"]
+    assert step_pieces(delay, context, np.ones(len(delay.coefficients(0.01)))) is None

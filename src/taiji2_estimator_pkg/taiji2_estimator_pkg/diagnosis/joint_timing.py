@@ -31,7 +31,7 @@ the fitted pair.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import minimize
@@ -41,7 +41,7 @@ from taiji2_estimator_pkg.diagnosis.dynamics import response_columns
 from taiji2_estimator_pkg.diagnosis.record import Record
 
 __all__ = ["DELAY_FAMILIES", "HIGH_BAND_TOP_HZ", "LAG_FAMILY", "HighBand", "JointTiming", "apply_joint_timing",
-           "fit_joint_timing", "high_band", "joint_partner"]
+           "fit_joint_timing", "high_band", "joint_partner", "score_joint_timing"]
 
 DELAY_FAMILIES = ("actuation_delay", "grs_time_offset")
 """Families that delay the thrust against the GRS (the GRS stamp offset also moves the star tracker)."""
@@ -180,7 +180,7 @@ def joint_partner(candidate: Candidate | NoiseCandidate, accepted: Sequence[Cand
 
 
 def fit_joint_timing(record: Record, delay: Candidate, lag: Candidate, others: Sequence[str],
-                     high: HighBand | None = None, start: tuple[float, float] | None = None) -> JointTiming:
+                     high: HighBand | None = None) -> JointTiming:
     """Fit (delay, lag) jointly by their exact change, the columns ``others`` (less theirs) refitted.
 
     Parameters
@@ -194,9 +194,6 @@ def fit_joint_timing(record: Record, delay: Candidate, lag: Candidate, others: S
         Columns refitted at each trial pair (the two candidates' own columns are dropped).
     high : HighBand, optional
         Adds the torque channels above the fit band to the objective (:func:`high_band`).
-    start : tuple of float, optional
-        (delay, lag) [s] of an earlier joint fit of the pair: the search starts there, on a smaller
-        simplex (the selection refits the pair at every step; the other columns move it little).
     """
     own = set(delay.column_names() + lag.column_names())
     free = [name for name in others if name not in own]
@@ -205,14 +202,20 @@ def fit_joint_timing(record: Record, delay: Candidate, lag: Candidate, others: S
     starts = [np.array([group - t, t]) for t in sorted({*_RIDGE_LAGS_S, record.secant.get(lag.key, 0.0)})
               if t + t0 >= 0.0]
     args = (record, delay, lag, free, high)
-    if start is None:
-        x0, step, evaluations = min(starts, key=lambda x: _joint_chi2(x, *args)), 0.01, 120
-    else:
-        x0, step, evaluations = np.array(start, dtype=np.float64), 0.002, 60
-    simplex = x0 + step * np.array([[0.0, 0.0], [1.0, 0.0], [-1.0, 1.0]])
-    best = minimize(_joint_chi2, x0, args=args, method="Nelder-Mead",
-                    options={"initial_simplex": simplex, "xatol": 2e-5, "fatol": 1e-3, "maxfev": evaluations})
+    start = min(starts, key=lambda x: _joint_chi2(x, *args))
+    simplex = start + np.array([[0.0, 0.0], [0.01, 0.0], [-0.01, 0.01]])
+    best = minimize(_joint_chi2, start, args=args, method="Nelder-Mead",
+                    options={"initial_simplex": simplex, "xatol": 2e-5, "fatol": 1e-3, "maxfev": 120})
     return JointTiming(delay, lag, float(best.x[0]), max(float(best.x[1]), -t0), float(best.fun))
+
+
+def score_joint_timing(record: Record, joint: JointTiming, others: Sequence[str], high: HighBand | None = None
+                       ) -> JointTiming:
+    """``joint`` with its chi2 at its fitted pair for the columns ``others`` now (not refitted: the
+    selection fits a pair once, at its first step, and rescores it as other effects join)."""
+    free = [name for name in others if name not in joint.delay.column_names() + joint.lag.column_names()]
+    x = np.array([joint.delay_s, joint.lag_s])
+    return replace(joint, chi2=_joint_chi2(x, record, joint.delay, joint.lag, free, high))
 
 
 def apply_joint_timing(record: Record, joint: JointTiming) -> None:

@@ -402,8 +402,10 @@ class Record:
         -> column DFTs kept across calls by a caller whose variant's signature does not change meanwhile."""
         chi2 = np.empty(len(onsets_s))
         log_det = np.empty(len(onsets_s))
-        plain = candidate.key not in self.exact_secants and (candidate.series is None
-                                                               or self.secant.get(candidate.key) is None)
+        # a relinearised series signature from its weighted terms (.step_onset)
+        value = self.secant.get(candidate.key)
+        weights = None if candidate.series is None or value is None else self._secant_weights(candidate, value)
+        plain = candidate.key not in self.exact_secants
         pieces: StepPieces | bool | None = None if plain else False  # built at the first onset not kept
         if fixed is None:
             fixed = self.design.conditioned(self.indices(others))  # the others' normal equations, factored once
@@ -412,7 +414,7 @@ class Record:
             ffts = None if columns is None else columns.get(key)
             if ffts is None:
                 if pieces is None:  # one build for every onset of the call (.step_onset)
-                    pieces = step_pieces(candidate, self.ctx) or False
+                    pieces = step_pieces(candidate, self.ctx, weights) or False
                 if pieces:
                     ffts = pieces.ffts_at(float(onset), self.k_max)
                 else:

@@ -14,7 +14,9 @@ instead of a build (the build was 3/4 of an onset's cost for a GRS cross-couplin
 10 Hz).
 
 Only for the variants whose columns are each one ``_perturb`` of :mod:`.candidates` (checked: one
-logged change per column); the timing candidates (knots, exact) and the ramps are built at each onset.
+logged change per column), and for a relinearised series signature (the nonlinearity: a weighted sum of
+terms that are each one ``_perturb``; its onset scan took 34 of 70 s of a 3-h diagnosis); the timing
+candidates (knots, exact) and the ramps are built at each onset.
 """
 
 from __future__ import annotations
@@ -95,9 +97,12 @@ class StepPieces:
         return i, lo, boundary
 
 
-def step_pieces(candidate: Candidate, ctx: CandidateContext) -> StepPieces | None:
+def step_pieces(candidate: Candidate, ctx: CandidateContext, weights: np.ndarray | None = None
+                ) -> StepPieces | None:
     """The candidate's pieces from the start (``ctx`` without an onset), or None where its columns are not
-    each one logged change (then build it at each onset)."""
+    each one logged change (then build it at each onset). ``weights``: the pieces of the one column
+    ``series_sum(ctx, weights)`` (a relinearised series signature, :meth:`.record.Record.relinearise`), each
+    series term one logged change: P is linear, so the column's change is the weighted sum of theirs."""
     if candidate.onset_kind != "step":
         return None
     t = ctx.readouts.t_s
@@ -105,7 +110,18 @@ def step_pieces(candidate: Candidate, ctx: CandidateContext) -> StepPieces | Non
         return None
     log: list[dict[str, np.ndarray]] = []
     # a step at the first sample: every change on, and a step-only parameter's column built (Candidate.step_params)
-    columns = candidate.build(replace(ctx.at_onset("step", float(t[0])), changes_log=log))
-    if len(log) != len(columns):
+    logged = replace(ctx.at_onset("step", float(t[0])), changes_log=log)
+    if weights is None:
+        columns = candidate.build(logged)
+        return StepPieces(ctx, columns, log) if len(log) == len(columns) else None
+    used = [w for w in weights if w != 0.0]
+    if candidate.series_term is None or candidate.grid is not None or not used:
+        return None  # a timing candidate's knots: its thrust change is not a logged change
+    column = candidate.series_sum(logged, weights)
+    if len(log) != len(used):
         return None
-    return StepPieces(ctx, columns, log)
+    change: dict[str, np.ndarray] = {}
+    for w, term in zip(used, log, strict=True):
+        for key, value in term.items():
+            change[key] = change[key] + w * value if key in change else w * value
+    return StepPieces(ctx, [column], [change])
