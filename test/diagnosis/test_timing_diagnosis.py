@@ -93,14 +93,11 @@ def test_latency_and_lag_are_fitted_jointly():
     _assert_corrected(result, data_config)
 
 
-def test_a_lag_beside_a_delay_is_selected_on_the_torque_high_band():
-    """A 73-ms latency with a 103-ms thruster lag (reference fidelity, 1 h, readout unclipped). Below the fit
-    band's top (0.2 Hz) the pair and a 176-ms delay alone are nearly the same; the lag was scored there only,
-    tied with a GRS stamp offset, and a 3-h set was named "actuation delay + GRS time offset" with a 0.3-1 Hz
-    torque gap. The selection now scores a lag beside an accepted delay jointly, with the torque channels up to
-    2 Hz (diagnosis.joint_timing). Checks (seeded, 3 sigma): the lag and the delay named, no other delay
-    family, each within 3 sigma of the truth, nothing unexplained; and the selection step that took the lag gave
-    it at least 3 times the gain of the GRS stamp offset (fit band only, the two tied: 57.6 and 57.7 at 3 h)."""
+def test_a_lag_beside_a_delay_is_named_with_its_split():
+    """A 73-ms latency with a 103-ms thruster lag (reference fidelity, 1 h, readout unclipped): the selection
+    scores the second of the pair by their joint exact fit (diagnosis.joint_timing) and one delay family only
+    from the start. Checks (seeded, 3 sigma): the lag and the delay named, no other delay family, each within
+    3 sigma of the truth, nothing unexplained."""
     data_config = load_config("type1", {"timing.actuation_latency_s": 0.073, "timing.thruster_time_constant_s": 0.103,
                                         "grs.readout_saturation": False})
     commands = maneuver_torque_commands(data_config, HOUR)
@@ -113,9 +110,6 @@ def test_a_lag_beside_a_delay_is_selected_on_the_torque_high_band():
     assert abs(delay.magnitude - 0.073) < 3.0 * delay.sigma
     assert abs(lag.magnitude - 0.103) < 3.0 * lag.sigma
     assert not result.verdict["unexplained"], result.verdict["summary"]
-    step = next(s for s in result.steps if s["accepted"] == "thruster_response")
-    stamp = next((t["delta_chi2"] for t in step["top"] if t["candidate"] == "grs_time_offset"), 0.0)
-    assert step["delta_chi2"] > 3.0 * stamp, step
 
 
 @pytest.mark.long  # CI time (37 s): test_diagnose.py's time_offset case names a GRS time offset in CI

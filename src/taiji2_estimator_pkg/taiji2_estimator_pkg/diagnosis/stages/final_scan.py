@@ -80,8 +80,6 @@ def final_scan(inp: DiagnosisInput, nominal: Nominal, where: Where, selection: S
             names = candidate.column_names()
             full.refine(candidate, [name for name in current if name not in names])
     if pair is not None:  # the thruster lag and a delay: their exact joint signature (..joint_timing)
-        # on the fit band only: the final fit refits both columns there, and a split the torque channels above
-        # it set (the selection's score) was moved along the ridge by that refit, leaving a 0.3-1 Hz gap
         apply_joint_timing(full, fit_joint_timing(full, *pair, current))
     theta_final, cov_final, chi2_final = full.fit(current)
     current, impulses, response = _impulses(inp, full, current, theta_final, say)

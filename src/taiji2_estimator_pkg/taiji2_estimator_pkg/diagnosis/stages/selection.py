@@ -23,11 +23,9 @@ from typing import Any
 from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES, Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.joint_timing import (
     DELAY_FAMILIES,
-    HighBand,
     JointTiming,
     apply_joint_timing,
     fit_joint_timing,
-    high_band,
     joint_partner,
     score_joint_timing,
 )
@@ -79,7 +77,7 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
     current = list(nominal.nuisance)
     _, _, chi2_current = full.fit(current)
     steps: list[dict[str, Any]] = []
-    joint_fits: dict[str, tuple[JointTiming, HighBand | None]] = {}  # per candidate: its pair's joint fit
+    joint_fits: dict[str, JointTiming] = {}  # per candidate: its pair's joint fit
     late_columns: dict = {}  # the late-start look's column DFTs, built once per selection (.late_start)
     for step in range(options.max_effects + len(TIMING_FAMILIES)):
         evaluations: list[tuple[float, float, Candidate | NoiseCandidate]] = []
@@ -96,18 +94,14 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
                 continue
             pair = joint_partner(candidate, accepted, full)
             if pair is not None:  # a lag beside an accepted delay, or the reverse: their joint exact gain,
-                # the torque channels above the fit band included (..joint_timing)
-                # fitted at the first step the pair meets, rescored at its fit after (a simplex per step cost
-                # 3-5 s; the effects joining later move the pair little)
-                if candidate.key not in joint_fits or joint_fits[candidate.key][0].delay is not pair[0]:
-                    high = high_band(full, current, full.fit(current)[0], pair)
-                    joint_fits[candidate.key] = (fit_joint_timing(full, *pair, current, high), high)
-                    joints[candidate.key] = joint_fits[candidate.key][0]
+                # fitted at the first step the pair meets, rescored at that fit after (the effects joining
+                # later move the pair little; a simplex per step cost 3-5 s)
+                if candidate.key not in joint_fits or joint_fits[candidate.key].delay is not pair[0]:
+                    joint_fits[candidate.key] = fit_joint_timing(full, *pair, current)
+                    joints[candidate.key] = joint_fits[candidate.key]
                 else:
-                    joints[candidate.key] = score_joint_timing(full, *joint_fits[candidate.key][:1], current,
-                                                               joint_fits[candidate.key][1])
-                high = joint_fits[candidate.key][1]
-                chi2_new = joints[candidate.key].chi2 - (0.0 if high is None else high.current)
+                    joints[candidate.key] = score_joint_timing(full, joint_fits[candidate.key], current)
+                chi2_new = joints[candidate.key].chi2
             elif candidate.series is not None:  # polynomial signature: its exact (series) gain
                 _, chi2_new = full.series_fit(candidate, current)
             else:
