@@ -65,6 +65,23 @@ def test_reference_latency_configured_is_no_gap(latency_data):
     assert result.verdict["summary"] == "no significant gap", result.verdict["summary"]
 
 
+def _latency_and_lag(latency_s, lag_s, seed):
+    """Diagnose 1 h of reference data with a command latency and a thruster lag (the readout unclipped) and
+    check that the two are named, nothing else, each within 3 sigma of the truth; (data layout, result)."""
+    data_config = load_config("type1", {"timing.actuation_latency_s": latency_s,
+                                        "timing.thruster_time_constant_s": lag_s, "grs.readout_saturation": False})
+    commands = maneuver_torque_commands(data_config, HOUR)
+    out = simulate_reference(data_config, seed, commands)
+    inp = prepare_input(out.t_s, out.st_quat_xyzw, out.voltages_v, commands, data_config.sample_rate_hz)
+    result = diagnose(inp, load_config("type1"))
+    named = {e.name: e for e in result.effects if e.accepted}
+    assert set(named) == {"actuation_delay", "thruster_response"}, result.verdict["summary"]
+    delay, lag = named["actuation_delay"], named["thruster_response"]
+    assert abs(delay.magnitude - latency_s) < 3.0 * delay.sigma
+    assert abs(lag.magnitude - lag_s) < 3.0 * lag.sigma
+    return data_config, result
+
+
 @pytest.mark.long  # CI time (35 s): the reference-latency tests above keep a timing effect named and sized in CI
 def test_latency_and_lag_are_fitted_jointly():
     """A command latency and a thruster lag together (reference fidelity, 1 h, the readout unclipped: the
@@ -77,17 +94,7 @@ def test_latency_and_lag_are_fitted_jointly():
     1 h, where the side-by-side residual would be ~1/3 of 408: still 17 times the bound). 1 h instead of the
     3 h first measured (5.4 there) keeps the test at ~35 s. What remains is second order in the calibration
     (docs/diagnosis.md section 11): the same data with the timing configured read "no significant gap"."""
-    data_config = load_config("type1", {"timing.actuation_latency_s": 0.12, "timing.thruster_time_constant_s": 0.08,
-                                        "grs.readout_saturation": False})
-    commands = maneuver_torque_commands(data_config, HOUR)
-    out = simulate_reference(data_config, 45, commands)
-    inp = prepare_input(out.t_s, out.st_quat_xyzw, out.voltages_v, commands, data_config.sample_rate_hz)
-    result = diagnose(inp, load_config("type1"))
-    named = {e.name: e for e in result.effects if e.accepted}
-    assert set(named) == {"actuation_delay", "thruster_response"}, result.verdict["summary"]
-    delay, lag = named["actuation_delay"], named["thruster_response"]
-    assert abs(delay.magnitude - 0.12) < 3.0 * delay.sigma
-    assert abs(lag.magnitude - 0.08) < 3.0 * lag.sigma
+    data_config, result = _latency_and_lag(0.12, 0.08, 45)
     assert all(loc["significance"] < 8.16 for loc in result.verdict["remaining"]
                if loc["channel"].startswith("torque")), result.verdict["remaining"]
     _assert_corrected(result, data_config)
@@ -98,17 +105,7 @@ def test_a_lag_beside_a_delay_is_named_with_its_split():
     scores the second of the pair by their joint exact fit (diagnosis.joint_timing) and one delay family only
     from the start. Checks (seeded, 3 sigma): the lag and the delay named, no other delay family, each within
     3 sigma of the truth, nothing unexplained."""
-    data_config = load_config("type1", {"timing.actuation_latency_s": 0.073, "timing.thruster_time_constant_s": 0.103,
-                                        "grs.readout_saturation": False})
-    commands = maneuver_torque_commands(data_config, HOUR)
-    out = simulate_reference(data_config, 46, commands)
-    inp = prepare_input(out.t_s, out.st_quat_xyzw, out.voltages_v, commands, data_config.sample_rate_hz)
-    result = diagnose(inp, load_config("type1"))
-    named = {e.name: e for e in result.effects if e.accepted}
-    assert set(named) == {"actuation_delay", "thruster_response"}, result.verdict["summary"]
-    delay, lag = named["actuation_delay"], named["thruster_response"]
-    assert abs(delay.magnitude - 0.073) < 3.0 * delay.sigma
-    assert abs(lag.magnitude - 0.103) < 3.0 * lag.sigma
+    _, result = _latency_and_lag(0.073, 0.103, 46)
     assert not result.verdict["unexplained"], result.verdict["summary"]
 
 
