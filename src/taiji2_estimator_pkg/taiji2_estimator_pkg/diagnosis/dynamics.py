@@ -27,7 +27,7 @@ import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
 
-__all__ = ["ResponseFit", "fit_response", "response_columns"]
+__all__ = ["ResponseFit", "fit_response"]
 
 _TORQUE = CHANNELS.index("torque_x")
 
@@ -63,17 +63,13 @@ class ResponseFit:
                 "amplitude_minus_one_at_1hz": self.amplitude_minus_one(1.0).tolist()}
 
 
-def response_columns(acc: np.ndarray, dt_s: float, edges: tuple[int, int]) -> np.ndarray:
-    """(n, 3) columns of b1, b2, delta for one axis's predicted angular acceleration: its -second difference,
-    -fourth difference and -first difference / dt, zero at the ends and over the ``edges`` left out."""
+def _columns(acc: np.ndarray, dt_s: float) -> np.ndarray:
+    """(n, 3) -second difference, -fourth difference, -first difference / dt of one axis (zero at the ends)."""
     n = acc.shape[0]
     out = np.zeros((n, 3))
     out[1:-1, 0] = -(acc[2:] - 2.0 * acc[1:-1] + acc[:-2])
     out[2:-2, 1] = -(acc[4:] - 4.0 * acc[3:-1] + 6.0 * acc[2:-2] - 4.0 * acc[1:-3] + acc[:-4])
     out[1:-1, 2] = -(acc[2:] - acc[:-2]) / (2.0 * dt_s)
-    head, tail = edges
-    out[:head + 2] = 0.0
-    out[max(n - tail - 2, 0):] = 0.0
     return out
 
 
@@ -110,8 +106,13 @@ def fit_response(residual: np.ndarray, acc_pred: np.ndarray, edges: tuple[int, i
     high = bins * (1.0 / (n * dt_s)) > f_max_hz
     if n < 8 or not np.any(high):
         return out, ResponseFit(coefficients, sigma, dt_s)
+    head, tail = edges
+    keep = np.ones(n, dtype=bool)
+    keep[:head + 2] = False
+    keep[n - tail - 2:] = False
     for axis in range(3):
-        x = response_columns(acc_pred[:, axis], dt_s, edges)
+        x = _columns(acc_pred[:, axis], dt_s)
+        x[~keep] = 0.0
         x_fft = np.fft.rfft(x, axis=0)[1:][high]
         y_full = np.fft.rfft(residual[:, _TORQUE + axis])
         y_fft = y_full[1:][high]

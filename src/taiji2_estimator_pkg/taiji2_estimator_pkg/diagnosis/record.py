@@ -347,10 +347,6 @@ class Record:
         onset = self.onsets.get(candidate.key) if onset_s == "current" else onset_s
         return self.ctx.at_onset(candidate.onset_kind, onset) if onset is not None else self.ctx
 
-    def time_columns(self, candidate: Candidate) -> list[np.ndarray]:
-        """(n, 15) time-domain columns of a candidate at its current linearisation and onset."""
-        return self._candidate_columns(candidate)
-
     def _candidate_columns(self, candidate: Candidate, onset_s: float | str | None = "current") -> list[np.ndarray]:
         """Time-domain columns of a candidate at its current linearisation (the secant, if relinearised),
         starting at its onset (or at ``onset_s``)."""
@@ -444,17 +440,6 @@ class Record:
 
     def response(self, names: Sequence[str], theta: np.ndarray) -> tuple[np.ndarray, ResponseFit]:
         """Residual channels after the fitted columns, with the response fitted and removed, and that fit."""
-        out = self.fitted_residual(names, theta)
-        if self._torque_psd is None:
-            self._torque_psd = self.spectrum.marginal(np.arange(1, self.n // 2 + 1))[:, 3:6]
-        # the model's prediction of the angular acceleration with the fitted columns (timing included):
-        # m - residual = acc_pred + sum of the columns' torque parts, free of the channel's noise
-        predicted = self.lin.m - out[:, 3:6]
-        return fit_response(out, predicted, self.lin.torque_edges, self.model.dt_s, self.settings.f_max_hz,
-                            self._torque_psd)
-
-    def fitted_residual(self, names: Sequence[str], theta: np.ndarray) -> np.ndarray:
-        """(n, 15) residual channels after the fitted columns (all frequencies; the chain's response not removed)."""
         out = self.lin.channels.copy()
         built: dict[str, list[np.ndarray]] = {}
         for name, value in zip(names, theta, strict=True):
@@ -468,7 +453,13 @@ class Record:
             if key not in built:
                 built[key] = self._candidate_columns(candidate)
             out -= value * built[key][candidate.params.index(param)]
-        return out
+        if self._torque_psd is None:
+            self._torque_psd = self.spectrum.marginal(np.arange(1, self.n // 2 + 1))[:, 3:6]
+        # the model's prediction of the angular acceleration with the fitted columns (timing included):
+        # m - residual = acc_pred + sum of the columns' torque parts, free of the channel's noise
+        predicted = self.lin.m - out[:, 3:6]
+        return fit_response(out, predicted, self.lin.torque_edges, self.model.dt_s, self.settings.f_max_hz,
+                            self._torque_psd)
 
     def marginal(self, kappa: float | None = None) -> np.ndarray:
         """(K, 15) per-channel spectrum at the fit bins with the star-tracker extra ``kappa``."""
