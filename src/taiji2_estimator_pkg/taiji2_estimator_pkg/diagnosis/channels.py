@@ -221,6 +221,29 @@ class Linearization:
     lhat_pred: np.ndarray
     torque_edges: tuple[int, int] = (0, 0)
 
+    def noise_free(self) -> Linearization:
+        """This linearization with the measured accelerations ``ghat`` and ``lhat`` replaced by the
+        predicted ones plus the straight line (a mean and a slope over the record) fitted to measured
+        minus predicted: an instrument for the columns of effects built on measured accelerations.
+
+        Such a column contains the noise of the channel it explains; fitted with G, its estimate is
+        shrunk (errors in variables) and G moves with it. A readout nonlinearity of GRS2 psi (Type 1,
+        k = 7.8e6, 3 h) was re-fitted at 6.0e6 +- 0.6e6 beside G, and G2 psi moved 2.6 sigma from its
+        nominal, unbiased value. Columns built on this linearization have the measured accelerations'
+        slow part, through which a quadratic term aliases with G (``2 k a0 a``), without their noise.
+        """
+        n = self.ghat.shape[0]
+        t = np.linspace(-1.0, 1.0, n)
+        basis = np.column_stack((np.ones(n), t))
+
+        def line_plus_predicted(measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+            difference = (measured - predicted).reshape(n, -1)
+            coefficients, *_ = np.linalg.lstsq(basis, difference, rcond=None)
+            return predicted + (basis @ coefficients).reshape(measured.shape)
+
+        return replace(self, ghat=line_plus_predicted(self.ghat, self.ghat_pred),
+                       lhat=line_plus_predicted(self.lhat, self.lhat_pred))
+
     @property
     def d_mean(self) -> np.ndarray:
         """(d_1 + d_2) / 2 [m]."""

@@ -598,18 +598,27 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
     sigma_d = np.full((2, 3), np.inf)
     t_mid = float(0.5 * (inp.t_s[0] + inp.t_s[-1])) if t_mid_s is None else t_mid_s
     values = [np.atleast_1d(np.asarray(entry[1], dtype=np.float64)).copy() for entry in free]
+    ctx = None
     for iteration in range(max(1, iterations)):
         lin = linearize(readouts, model, g, d)
         columns: list[np.ndarray] = []
         if fixed or free:
             ctx = CandidateContext(lin, readouts, model, settings.orbit_period_s, settings.suspension_hz,
                                    settings.damping, t_mid)
-            for entry in fixed:
-                lin.channels[:] -= fixed_change(ctx, *entry)
-            for entry, value in zip(free, values, strict=True):
-                change, derivatives = _change_and_derivatives(ctx, entry, value)
-                lin.channels[:] -= change
-                columns += derivatives
+            with np.errstate(over="ignore", invalid="ignore"):  # a diverging re-fit: checked below
+                for entry in fixed:
+                    lin.channels[:] -= fixed_change(ctx, *entry)
+                instrument = replace(ctx, lin=lin.noise_free()) if free else ctx
+                for entry, value in zip(free, values, strict=True):
+                    change, derivatives = _change_and_derivatives(ctx, entry, value, instrument)
+                    lin.channels[:] -= change
+                    columns += derivatives
+            if not (np.all(np.isfinite(lin.channels)) and all(np.all(np.isfinite(c)) for c in columns)):
+                # the effects' values left every range where their model is finite: no fit at them
+                progress(f"calibration iteration {iteration + 1}: the extended model is not finite; stopped")
+                if info is not None:
+                    info["last_update_sigma"] = math.inf
+                break
         whitener = Whitener(NoiseSpectrum(model, d, n, inp.angular_loss), bins)
         design = Design.build(whitener, dft(lin.channels, k_max), [*names, *(f"free{j}" for j in range(len(columns)))],
                               [column_fft(nuisance_column(lin, model, name), k_max) for name in names]
@@ -642,26 +651,32 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
         info["beyond_series_bound"] = [
             entry[0].key for entry, value in zip(free, values, strict=True)
             if entry[0].exact is None and entry[0].series is not None and entry[0].bound is not None
-            and abs(float(value[0])) > entry[0].bound(ctx)]
+            and (ctx is None or not abs(float(value[0])) <= entry[0].bound(ctx))]
     return g, d, sigma_g, sigma_d
 
 
-def _change_and_derivatives(ctx: CandidateContext, entry: tuple, value: np.ndarray
+def _change_and_derivatives(ctx: CandidateContext, entry: tuple, value: np.ndarray, instrument: CandidateContext
                             ) -> tuple[np.ndarray, list[np.ndarray]]:
-    """The channel change of a free effect at ``value`` and its derivative per parameter: the signature
-    columns of a linear one (no exact or series form: its change is ``sum value_j column_j``), a
-    forward difference (step 1e-4 of the value) of an exact or series one."""
+    """The channel change of a free effect at ``value`` (on ``ctx``: the measured accelerations) and its
+    derivative per parameter, on ``instrument`` (:meth:`.channels.Linearization.noise_free`: a column
+    with the channel's own noise in it shrinks its effect and moves G): the signature columns of a
+    linear one (no exact or series form: its change is ``sum value_j column_j``), a forward difference
+    (step 1e-4 of the value) of an exact or series one. The fit then solves the instrumental-variable
+    equations ``J_instrument^T W r = 0``, whose solution is unbiased where the measured ``J^T W r = 0``
+    is not."""
     candidate, _, onset, *rest = entry
     t_ref = rest[0] if rest else None
     if candidate.exact is None and (candidate.series is None or candidate.coefficients is None):
-        derivatives = list(candidate.build(_onset_context(ctx, candidate, onset, t_ref)))
-        return sum(v * column for v, column in zip(value, derivatives, strict=True)), derivatives
+        columns = candidate.build(_onset_context(ctx, candidate, onset, t_ref))
+        derivatives = list(candidate.build(_onset_context(instrument, candidate, onset, t_ref)))
+        return sum(v * column for v, column in zip(value, columns, strict=True)), derivatives
     change = fixed_change(ctx, candidate, value, onset, t_ref)
+    at_value = fixed_change(instrument, candidate, value, onset, t_ref)
     derivatives = []
     for j in range(value.size):
         unit = np.zeros(value.size)
         unit[j] = 1e-4 * abs(float(value[j])) or 1e-9
-        derivatives.append((fixed_change(ctx, candidate, value + unit, onset, t_ref) - change) / unit[j])
+        derivatives.append((fixed_change(instrument, candidate, value + unit, onset, t_ref) - at_value) / unit[j])
     return change, derivatives
 
 
