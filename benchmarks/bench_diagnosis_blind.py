@@ -715,7 +715,7 @@ def corrected_scores(results: list[dict]) -> dict:
     A parameter is *biased* by the drawn effect when its nominal calibration is more than 3 sigma from
     the truth; the goal is the corrected one within 2 sigma there.
     """
-    biased_nominal, biased_corrected, corrected_all = [], [], []
+    biased_nominal, biased_corrected, corrected_all, sigma_ratio = [], [], [], []
     sets = worse = 0
     for r in results:
         cal = r.get("calibration")
@@ -726,6 +726,9 @@ def corrected_scores(results: list[dict]) -> dict:
 
         zn, zc = (_calibration_z(cal[part], g_true, d_true) for part in ("nominal", "corrected"))
         corrected_all += zc.tolist()
+        sigmas = [np.concatenate((np.ravel(cal[part]["g_angular_sigma_relative"]),
+                                  np.ravel(cal[part]["com_offset_sigma_m"]))) for part in ("nominal", "corrected")]
+        sigma_ratio += (sigmas[1] / sigmas[0]).tolist()
         biased = np.abs(zn) > 3.0
         biased_nominal += zn[biased].tolist()
         biased_corrected += zc[biased].tolist()
@@ -739,6 +742,10 @@ def corrected_scores(results: list[dict]) -> dict:
             "corrected_biased_nominal_abs_z_median": float(np.median(np.abs(biased_nominal))) if zb.size else None,
             "corrected_biased_abs_z_median": float(np.median(np.abs(zb))) if zb.size else None,
             "corrected_all_z_std": float(np.std(zc_all)) if zc_all.size > 1 else None,
+            # the price of the corrected calibration's honesty: its sigma over the nominal one's (aliases, rivals
+            # and near misses widen it; the re-fitted effects' marginalisation too)
+            "corrected_sigma_ratio_median": float(np.median(sigma_ratio)) if sigma_ratio else None,
+            "corrected_sigma_ratio_p90": float(np.percentile(sigma_ratio, 90)) if sigma_ratio else None,
             "corrected_all_within_2_sigma": float(np.mean(np.abs(zc_all) <= 2.0)) if zc_all.size else None}
 
 

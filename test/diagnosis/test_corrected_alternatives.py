@@ -15,7 +15,16 @@ import numpy as np
 import pytest
 
 from taiji2_estimator_pkg.diagnosis import diagnose, prepare_input
-from taiji2_estimator_pkg.diagnosis.stages.corrected import RIVAL_DELTA_CHI2, _envelope, rivals
+from taiji2_estimator_pkg.diagnosis.candidates import candidate_catalog
+from taiji2_estimator_pkg.diagnosis.model import NominalModel
+from taiji2_estimator_pkg.diagnosis.stages.corrected import (
+    NEAR_MISS_DELTA_CHI2,
+    NEAR_MISSES_MAX,
+    RIVAL_DELTA_CHI2,
+    _envelope,
+    near_misses,
+    rivals,
+)
 from taiji2_model.config import load_config
 from taiji2_model.effect_catalog import make_effect
 from taiji2_sim_pkg.core.simulator import maneuver_torque_commands, simulate_batch
@@ -68,6 +77,25 @@ def test_rivals_are_the_runners_up_within_the_delta_chi2():
                                                        {"candidate": "e", "delta_chi2": 19.0}]},
         {"accepted": None, "top": [{"candidate": "f", "delta_chi2": 1.0}]}]
     assert rivals("a", steps) == ["b"] and rivals("d", steps) == ["e"] and rivals("x", steps) == []
+
+
+def test_near_misses_are_the_last_steps_variants_above_three_sigma_one_per_signature():
+    model = NominalModel.from_config(load_config("type1"))
+    catalog, _ = candidate_catalog(None, 5880.0, 0.0, 0.0, 1e-5, model)
+    by_key = {c.key: c for c in catalog}
+    steps = [{"accepted": "readout_nonlinearity[grs2.z]", "delta_chi2": 35.6, "top": [
+        {"candidate": "readout_nonlinearity[grs2.z]", "delta_chi2": 35.6},
+        {"candidate": "inertia_error[x]", "delta_chi2": 20.0}]},
+        {"accepted": None, "top": [
+            {"candidate": "inertia_error[z]", "delta_chi2": 12.45},  # the same signature as the torque gain:
+            {"candidate": "thruster_torque_gain[z]", "delta_chi2": 12.45},  # one of the two
+            {"candidate": "actuation_delay", "delta_chi2": 11.0},  # timing: folded into the model, not re-fitted
+            {"candidate": "cross_coupling[grs1.imbalance_z]", "delta_chi2": 10.9},  # an alias of a named one
+            {"candidate": "cross_coupling[grs2.imbalance_z]", "delta_chi2": NEAR_MISS_DELTA_CHI2},
+            {"candidate": "com_drift[grs1.x]", "delta_chi2": NEAR_MISS_DELTA_CHI2 - 0.01}]}]
+    found = near_misses(steps, {"cross_coupling[grs1.imbalance_z]"}, by_key)
+    assert found == ["inertia_error[z]", "cross_coupling[grs2.imbalance_z]"][:NEAR_MISSES_MAX], found
+    assert near_misses(steps[:1], set(), by_key) == []  # the selection stopped at its limit: no last step
 
 
 @pytest.mark.parametrize("spread", [0.0, 0.5, 3.0, 30.0])

@@ -221,6 +221,12 @@ def _markdown(result: DiagnosisResult, files: list[str], choice: dict[str, Any] 
         lines += ["", "Covariance (12 x 12, relative G then d): report.json `corrected_calibration.covariance`."]
         for alternative in corrected.get("alias_alternatives", []):
             worst = max(abs(x) for x in alternative["shift_from_corrected_sigma"])
+            if alternative.get("kind") == "near_miss":
+                lines += ["", f"Near miss: `{alternative['alias']}` gained at least 3 sigma but not the floor over "
+                              "the catalog (not named, not ruled out); corrected with it added, G and d move by up "
+                              f"to {worst:.2f} sigma of the named effects' fit "
+                              "(report.json `corrected_calibration.alias_alternatives`)."]
+                continue
             lines += ["", f"Alias: the data do not tell `{alternative['named']}` from `{alternative['alias']}` "
                           "(the same signature, or a fit worse by less than 3 sigma); corrected with the latter, G "
                           f"and d move by up to {worst:.2f} sigma of the named effect's fit "
