@@ -174,13 +174,27 @@ def _alias_alternatives(inp: DiagnosisInput, start: Any, reports: Sequence[Effec
     alternatives = []
     sigma = np.concatenate((np.ravel(corrected["g_angular_sigma_relative"]), np.ravel(corrected["com_offset_sigma_m"])))
     base_g, base_d = np.asarray(corrected["g_angular"]), np.asarray(corrected["com_offset_m"])
+
+    def refit(kind: str, named: str | None, key: str, effects: Sequence[Fixed]) -> None:
+        """The corrected calibration with ``effects`` re-fitted, appended to ``alternatives`` where trusted."""
+        result = corrected_calibration(inp, start.model, start.settings, timing_change, held, nominal, start.t_mid,
+                                       iterations, say, effects)
+        reason = untrusted(result, iterations)
+        if reason:
+            say(f"  with {key}: {reason}; not reported")
+            return
+        g, d = np.asarray(result["g_angular"]), np.asarray(result["com_offset_m"])
+        shift = np.concatenate(((g / base_g - 1.0).ravel(), (d - base_d).ravel())) / sigma
+        alternatives.append({"kind": kind, "named": named, "alias": key, "g_angular": result["g_angular"],
+                             "com_offset_m": result["com_offset_m"], "shift_from_corrected_sigma": shift.tolist()})
+
+    named = {entry[0].key for entry in free}
     for report in reports:
         if not report.accepted or report.name in TIMING_FAMILIES:
             continue
         index = next((i for i, entry in enumerate(free) if entry[0].key == report.key), None)
         if index is None:
             continue
-        named = {entry[0].key for entry in free}
         aliases = [key for key in dict.fromkeys([*report.aliases, *rivals(report.key, steps)])
                    if key in by_key and by_key[key].name not in TIMING_FAMILIES and key not in named
                    ][:ALIASES_PER_EFFECT]
@@ -190,32 +204,11 @@ def _alias_alternatives(inp: DiagnosisInput, start: Any, reports: Sequence[Effec
             swapped = list(free)
             swapped[index] = (other, np.zeros(len(other.params)), onset, t_ref if other.onset_kind == "ramp" else None)
             say(f"corrected calibration with {alias} in place of {report.key} (aliases)")
-            result = corrected_calibration(inp, start.model, start.settings, timing_change, held, nominal,
-                                           start.t_mid, iterations, say, swapped)
-            reason = untrusted(result, iterations)
-            if reason:
-                say(f"  with {alias}: {reason}; not reported")
-                continue
-            g, d = np.asarray(result["g_angular"]), np.asarray(result["com_offset_m"])
-            shift = np.concatenate(((g / base_g - 1.0).ravel(), (d - base_d).ravel())) / sigma
-            alternatives.append({"kind": "alias", "named": report.key, "alias": alias,
-                                 "g_angular": result["g_angular"], "com_offset_m": result["com_offset_m"],
-                                 "shift_from_corrected_sigma": shift.tolist()})
-    excluded = {entry[0].key for entry in free} | {key for report in reports if report.accepted
-                                                   for key in report.aliases}
+            refit("alias", report.key, alias, swapped)
+    excluded = named | {key for report in reports if report.accepted for key in report.aliases}
     for key in near_misses(steps, excluded, by_key):
-        other = by_key[key]
         say(f"corrected calibration with the near miss {key} added")
-        result = corrected_calibration(inp, start.model, start.settings, timing_change, held, nominal, start.t_mid,
-                                       iterations, say, [*free, (other, np.zeros(len(other.params)), None, None)])
-        reason = untrusted(result, iterations)
-        if reason:
-            say(f"  with {key}: {reason}; not reported")
-            continue
-        g, d = np.asarray(result["g_angular"]), np.asarray(result["com_offset_m"])
-        shift = np.concatenate(((g / base_g - 1.0).ravel(), (d - base_d).ravel())) / sigma
-        alternatives.append({"kind": "near_miss", "named": None, "alias": key, "g_angular": result["g_angular"],
-                             "com_offset_m": result["com_offset_m"], "shift_from_corrected_sigma": shift.tolist()})
+        refit("near_miss", None, key, [*free, (by_key[key], np.zeros(len(by_key[key].params)), None, None)])
     if not alternatives:
         return {}
     names = corrected["covariance_order"]
