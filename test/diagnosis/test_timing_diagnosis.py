@@ -109,6 +109,26 @@ def test_a_lag_beside_a_delay_is_named_with_its_split():
     assert not result.verdict["unexplained"], result.verdict["summary"]
 
 
+def test_a_delay_from_an_onset_lists_the_lag_as_its_alias():
+    """A 20-ms actuation delay from 1800 s of 1 h (standard simulator, seed 47). From an onset no exact timing
+    scan is run, so a delay and a thruster lag (both shift the thrust by -tau d(torque)/dt to first order) are
+    told apart by nothing: whichever is named lists the other as its alias. Blind seed 13, set 21: a 5.7-ms
+    delay from 5,404 s was named as a 7.2-ms lag from 5,483 s with no alias (only the two delay families were
+    compared with each other from an onset)."""
+    config = load_config("type1")
+    commands = maneuver_torque_commands(config, HOUR)
+    out = simulate_batch(config, 47, commands, effects=[make_effect(name="actuation_delay", delay_s=0.02,
+                                                                    onset_s=1800.0)])
+    result = diagnose(prepare_input(out.t_s, out.st_quat_xyzw, out.voltages_v, commands, config.sample_rate_hz),
+                      config)
+    timing = [e for e in result.effects if e.accepted and e.name in TIMING_FAMILIES]
+    assert len(timing) == 1, result.verdict["summary"]
+    (named,) = timing
+    assert named.parameters.get("onset_s", {}).get("modelled"), named.parameters
+    listed = {named.key, *named.aliases}
+    assert {"actuation_delay", "thruster_response"} <= listed, (named.key, named.aliases)
+
+
 @pytest.mark.long  # CI time (37 s): test_diagnose.py's time_offset case names a GRS time offset in CI
 def test_start_stamp_convention_is_a_grs_time_offset():
     # GRS stamped at the start of its integration interval: every GRS sample is 0.1 s early for the

@@ -7,7 +7,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
-from taiji2_estimator_pkg.diagnosis.joint_timing import DELAY_FAMILIES
 from taiji2_estimator_pkg.diagnosis.record import Record
 
 __all__ = ["ALIAS_CHUNK", "Aliases"]
@@ -50,11 +49,12 @@ class Aliases:
         """Variants (other than itself) whose signature correlates above the threshold.
 
         A candidate with a modelled onset is compared with the other variants started at the same onset
-        (a torque gain from t0 and an inertia error from t0 are as alike as from the start); the timing
-        variants, whose aliasing is decided by their exact scans from the start, are left out there, but for
-        the two delay families beside each other: their thrust parts are the same, and the star tracker's
-        part that tells them apart is linear, so their first-order columns decide (a 5-ms delay from an
-        onset, named as a GRS stamp offset, had no alias).
+        (a torque gain from t0 and an inertia error from t0 are as alike as from the start). From an onset
+        no exact timing scan is run, so a timing variant is compared with the other timing variants by their
+        first-order columns there: a delay and a lag both shift the thrust by -tau d(torque)/dt (a 5.7-ms
+        delay from 5,404 s, named as a 7.2-ms lag from 5,483 s, had no alias: blind seed 13, set 21; only the
+        two delay families were compared), and the star tracker's part tells the delay families apart.
+        A non-timing variant is not compared with the timing variants from an onset.
         """
         i = self.position.get(candidate.key)
         if i is None:
@@ -76,9 +76,8 @@ class Aliases:
 
     def _of_at_onset(self, candidate: Candidate, onset_s: float) -> list[str]:
         record = self.record
-        delays = candidate.name in DELAY_FAMILIES
-        others = [c for c in self.single if c.key != candidate.key and (c.grid is None or (
-            delays and c.name in DELAY_FAMILIES))]
+        timing = candidate.grid is not None
+        others = [c for c in self.single if c.key != candidate.key and (c.grid is None or timing)]
         fixed = record.design.conditioned(record.indices(record.nuisance))
         own = record.column_ffts(candidate)
         own_power = float(fixed.projected_gram(record.whitener, own)[0, 0])
