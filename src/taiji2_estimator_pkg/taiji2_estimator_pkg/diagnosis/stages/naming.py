@@ -140,9 +140,11 @@ def _apply_naming_rule(verdict: dict[str, Any], reports: Sequence[EffectReport],
         return
     names = list(dict.fromkeys(report.name for report in named))
     redundant = _redundant(reports, named, rejected)
+    family_of = {report.key: report.name for report in reports}
     for key in redundant:
-        rejected[key] = (f"redundant beside the named {next(r.name for r in named if r.key != key)}: the final model "
-                         f"is better without it (drop-one BIC score {redundant[key]:.1f}); {rejected[key]}")
+        beside = next(r.key for r in named if r.name == family_of[key])
+        rejected[key] = (f"redundant beside the named {beside}: the final model is better without it (drop-one BIC "
+                         f"score {redundant[key]:.1f}); {rejected[key]}")
     if len(redundant) == len(rejected):  # the verdict stands on the named effects (the final scan's, unchanged)
         verdict.update({"effects": names, "rejected": rejected, "accepted_variants": [r.key for r in named]})
         if verdict["summary"].startswith("explained by "):
