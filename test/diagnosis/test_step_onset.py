@@ -75,3 +75,22 @@ def test_a_relinearised_series_signature_from_one_build_equals_its_build_at_each
                                        err_msg=f"{key} from {onset} s")
     delay = catalog["grs_time_offset"]
     assert step_pieces(delay, context, np.ones(len(delay.coefficients(0.01)))) is None
+
+
+def test_the_nonlinearity_series_in_one_build_equals_the_sum_of_its_terms(context):
+    """``series_sum`` builds the nonlinearity's weighted series in one perturbation (P linear): it equals the
+    weighted sum of the terms built one by one, to rounding, from small k to the series bound, from the start
+    and from an onset."""
+    catalog = {c.key: c for c in candidate_catalog()[0]}
+    t = context.readouts.t_s
+    for key in ("readout_nonlinearity[grs1.z]", "readout_nonlinearity[grs2.phi]", "readout_nonlinearity[grs1.psi]"):
+        candidate = catalog[key]
+        assert candidate.series_weighted is not None
+        bound = candidate.bound(context)
+        for k in (1e-3 * bound, -0.5 * bound, bound):
+            weights = candidate.coefficients(k)
+            for ctx in (context, context.at_onset("step", float(t[2500]))):
+                fast = candidate.series_sum(ctx, weights)
+                terms = sum(w * candidate.series_term(ctx, j) for j, w in enumerate(weights))
+                np.testing.assert_allclose(fast, terms, rtol=0.0, atol=1e-12 * float(np.max(np.abs(terms))),
+                                           err_msg=f"{key} at k = {k:g}")

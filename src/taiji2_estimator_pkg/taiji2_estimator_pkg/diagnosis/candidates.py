@@ -212,6 +212,11 @@ class Candidate:
     leading : (int, callable) or None
         ``(m, leading_bound)``: the first m series terms alone hold while ``|theta| <= leading_bound(ctx)``
         (the exact scan first fits with them, and builds the others only beyond; needs ``series_term``).
+    series_weighted : callable or None
+        ``series_weighted(ctx, weights) -> sum_j weights_j c_j`` in one build, for a series whose terms are
+        one linear map (:func:`.channels.perturbation_channels`) of data-side changes: the map applied once
+        to the weighted sum of the changes (the nonlinearity: of the powers of the measured readout),
+        instead of once per term (:meth:`series_sum`).
     """
 
     name: str
@@ -227,6 +232,7 @@ class Candidate:
     exact: Callable[[CandidateContext, float], np.ndarray] | None = None
     series_term: Callable[[CandidateContext, int], np.ndarray] | None = None
     leading: tuple[int, Callable[[CandidateContext], float]] | None = None
+    series_weighted: Callable[[CandidateContext, np.ndarray], np.ndarray] | None = None
     step_params: int = 0
     """The last ``step_params`` parameters act only from a step onset on: their columns are zero for an effect
     present from the start (a constant torque from the start is the dropped DC bin of its channel: the free
@@ -235,7 +241,10 @@ class Candidate:
 
     def series_sum(self, ctx: CandidateContext, weights: np.ndarray) -> np.ndarray:
         """``sum_j weights_j c_j`` of the series columns; the terms of zero weight are not built when the
-        candidate can build one term alone (the same sum: a zero term adds nothing)."""
+        candidate can build one term alone (the same sum: a zero term adds nothing), in one build where
+        it can (:attr:`series_weighted`)."""
+        if self.series_weighted is not None and np.any(weights):
+            return self.series_weighted(ctx, np.asarray(weights, dtype=np.float64))
         if self.series_term is None or not np.any(weights):
             return sum(w * c for w, c in zip(weights, self.series(ctx), strict=True))
         return sum(w * self.series_term(ctx, j) for j, w in enumerate(weights) if w != 0.0)
@@ -482,16 +491,25 @@ _CATALAN = [math.comb(2 * n, n) // (n + 1) for n in range(NONLINEARITY_SERIES_TE
 
 
 def _nonlinearity(grs: int, readout: str) -> Candidate:
-    def powers(ctx: CandidateContext, exponents: Sequence[int]) -> list[np.ndarray]:
+    def readout_change(ctx: CandidateContext, readout_series: np.ndarray) -> np.ndarray:
+        """The channels of ``readout_series`` added to the measured readout."""
         if readout in ANGULAR_READOUTS:
-            axis = ANGULAR_READOUTS.index(readout)
-            measured = ctx.lin.ghat[:, grs, axis]
-            return [_perturb(ctx, dg=_tmrf_to_crf_column(ctx, grs, axis, measured ** p))
-                    for p in exponents]
-        axis = LINEAR_READOUTS.index(readout)
-        measured = ctx.lin.lhat[:, grs, axis]
-        return [_perturb(ctx, dl=_tmrf_to_crf_column(ctx, grs, axis, measured ** p))
-                for p in exponents]
+            return _perturb(ctx, dg=_tmrf_to_crf_column(ctx, grs, ANGULAR_READOUTS.index(readout), readout_series))
+        return _perturb(ctx, dl=_tmrf_to_crf_column(ctx, grs, LINEAR_READOUTS.index(readout), readout_series))
+
+    def measured(ctx: CandidateContext) -> np.ndarray:
+        if readout in ANGULAR_READOUTS:
+            return ctx.lin.ghat[:, grs, ANGULAR_READOUTS.index(readout)]
+        return ctx.lin.lhat[:, grs, LINEAR_READOUTS.index(readout)]
+
+    def powers(ctx: CandidateContext, exponents: Sequence[int]) -> list[np.ndarray]:
+        m = measured(ctx)
+        return [readout_change(ctx, m ** p) for p in exponents]
+
+    def series_weighted(ctx: CandidateContext, weights: np.ndarray) -> np.ndarray:
+        # sum_j w_j P(m^(j+2)) = P(m^2 sum_j w_j m^j): P is linear, one build instead of one per term
+        m = measured(ctx)
+        return readout_change(ctx, m ** 2 * np.polynomial.polynomial.polyval(m, weights))
 
     def build(ctx: CandidateContext) -> list[np.ndarray]:
         return powers(ctx, (2,))
@@ -515,11 +533,7 @@ def _nonlinearity(grs: int, readout: str) -> Candidate:
         return {"name": "readout_nonlinearity", "k": float(theta[0]), "grs": grs + 1, "readout": readout}
 
     def a_max(ctx: CandidateContext) -> float:
-        if readout in ANGULAR_READOUTS:
-            measured = ctx.lin.ghat[:, grs, ANGULAR_READOUTS.index(readout)]
-        else:
-            measured = ctx.lin.lhat[:, grs, LINEAR_READOUTS.index(readout)]
-        return max(float(np.max(np.abs(measured))), 1e-300)
+        return max(float(np.max(np.abs(measured(ctx)))), 1e-300)
 
     def bound(ctx: CandidateContext) -> float:
         return NONLINEARITY_BOUND / a_max(ctx)
@@ -529,7 +543,7 @@ def _nonlinearity(grs: int, readout: str) -> Candidate:
 
     return Candidate("readout_nonlinearity", f"grs{grs + 1}.{readout}", ("k",), unit, build, inject, series,
                      coefficients, bound, series_term=series_term,
-                     leading=(NONLINEARITY_LEADING_TERMS, leading_bound))
+                     leading=(NONLINEARITY_LEADING_TERMS, leading_bound), series_weighted=series_weighted)
 
 
 def _inertia_diagonal(axis: int) -> Candidate:

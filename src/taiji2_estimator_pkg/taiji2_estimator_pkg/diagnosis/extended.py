@@ -219,7 +219,7 @@ def corrected_calibration(inp: DiagnosisInput, model: NominalModel, settings: Re
         z, GRS2 ...), marginal over the re-fitted effects), ``g_shift_sigma`` (corrected / nominal - 1
         in corrected sigmas), ``d_shift_sigma``, ``timing`` (the extended model's reduced timing),
         ``chi2``, ``dof``, ``refitted`` (variant key, onset, re-fitted values and sigmas of ``free``),
-        ``last_update_sigma`` (the Gauss-Newton's last largest update [sigma]) and ``beyond_series_bound``
+        ``last_update_sigma`` (the Gauss-Newton's last largest update [sigma]), ``iterations`` (those run) and ``beyond_series_bound``
         (free effects whose value left the range of their series form).
     """
     extended = replace(model, delay_s=model.delay_s + timing[0], st_offset_s=model.st_offset_s + timing[1],
@@ -242,7 +242,7 @@ def corrected_calibration(inp: DiagnosisInput, model: NominalModel, settings: Re
         "timing": {"delay_s": extended.delay_s, "st_offset_s": extended.st_offset_s,
                    "time_constant_s": extended.time_constant_s},
         "chi2": info.get("chi2"), "dof": info.get("dof"), "refitted": refitted,
-        "last_update_sigma": info.get("last_update_sigma"),
+        "last_update_sigma": info.get("last_update_sigma"), "iterations": info.get("iterations"),
         "beyond_series_bound": info.get("beyond_series_bound", []),
     }
 

@@ -572,7 +572,8 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
     effects (a G that an effect aliases with is as uncertain as that effect's magnitude makes it).
     ``info`` (if given) receives ``"cov"``, the (12, 12) covariance of (relative G, d) of the last
     iteration, ``"chi2"``, ``"dof"``, ``"last_update_sigma"`` (the last iteration's largest update in
-    sigmas: the fit has not converged where it is large) and, with ``free``, ``"free_values"`` (the
+    sigmas: the fit has not converged where it is large; with ``free``, a fit whose updates grow twice in a
+    row past its third iteration stops there), ``"iterations"`` (those run) and, with ``free``, ``"free_values"`` (the
     re-fitted values, one array per entry), ``"free_sigma"`` and ``"beyond_series_bound"`` (the free
     effects whose value left the range where their series form holds).
 
@@ -599,6 +600,7 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
     t_mid = float(0.5 * (inp.t_s[0] + inp.t_s[-1])) if t_mid_s is None else t_mid_s
     values = [np.atleast_1d(np.asarray(entry[1], dtype=np.float64)).copy() for entry in free]
     ctx = None
+    updates: list[float] = []
     for iteration in range(max(1, iterations)):
         lin = linearize(readouts, model, g, d)
         columns: list[np.ndarray] = []
@@ -645,7 +647,15 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
         progress(f"calibration iteration {iteration + 1}: largest update {change:.3g} sigma")
         if info is not None:
             info["last_update_sigma"] = change
+            info["iterations"] = iteration + 1
         if change < 0.05:
+            break
+        updates.append(change)
+        if free and len(updates) >= 4 and updates[-1] > updates[-2] > updates[-3]:
+            # a re-fit whose updates grow twice in a row past its third iteration is not converging (an
+            # alias swapped in that oscillates against a nonlinearity: 0.35, 0.73, 1.1, 1.7, 1.4, 0.58 sigma):
+            # it is withheld at the last iteration as at this one, without the iterations in between
+            progress(f"calibration iteration {iteration + 1}: the updates grow; stopped")
             break
     if info is not None and free:  # a series form holds only within its bound (the nonlinearity: k a_max ~ 0.2)
         info["beyond_series_bound"] = [

@@ -118,6 +118,8 @@ def step_pieces(candidate: Candidate, ctx: CandidateContext, weights: np.ndarray
     if candidate.series_term is None or candidate.grid is not None or not used:
         return None  # a timing candidate's knots: its thrust change is not a logged change
     column = candidate.series_sum(logged, weights)
+    if candidate.series_weighted is not None:  # the sum built in one logged change, weights applied
+        return StepPieces(ctx, [column], [log[0]]) if len(log) == 1 else None
     if len(log) != len(used):
         return None
     change: dict[str, np.ndarray] = {}

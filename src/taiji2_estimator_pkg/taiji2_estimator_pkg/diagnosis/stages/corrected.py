@@ -99,7 +99,7 @@ def untrusted(corrected: dict[str, Any], iterations: int) -> str:
     last = corrected.get("last_update_sigma")
     if last is not None and last > CONVERGED_UPDATE_SIGMA:
         return (f"the re-fit of G and d with the named effects did not converge (last update {last:.3g} sigma after "
-                f"{iterations} iterations): the named effects are too large for the extended model's linearisation")
+                f"{corrected.get('iterations') or iterations} iterations): the named effects are too large for the extended model's linearisation")
     if corrected.get("beyond_series_bound"):
         return ("re-fitted beyond the range where their model holds: " + ", ".join(corrected["beyond_series_bound"]))
     return ""
