@@ -219,8 +219,8 @@ def corrected_calibration(inp: DiagnosisInput, model: NominalModel, settings: Re
         z, GRS2 ...), marginal over the re-fitted effects), ``g_shift_sigma`` (corrected / nominal - 1
         in corrected sigmas), ``d_shift_sigma``, ``timing`` (the extended model's reduced timing),
         ``chi2``, ``dof``, ``refitted`` (variant key, onset, re-fitted values and sigmas of ``free``),
-        ``last_update_sigma`` (the Gauss-Newton's last largest update [sigma]), ``iterations`` (those run) and ``beyond_series_bound``
-        (free effects whose value left the range of their series form).
+        ``last_update_sigma`` (the Gauss-Newton's last largest update [sigma]), ``iterations`` (those run)
+        and ``beyond_series_bound`` (free effects whose value left the range of their series form).
     """
     extended = replace(model, delay_s=model.delay_s + timing[0], st_offset_s=model.st_offset_s + timing[1],
                        time_constant_s=max(model.time_constant_s + timing[2], 0.0))

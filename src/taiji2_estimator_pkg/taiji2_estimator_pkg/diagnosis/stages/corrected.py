@@ -98,8 +98,9 @@ def untrusted(corrected: dict[str, Any], iterations: int) -> str:
     ~85 of its sigmas from the truth while the nominal one was 4-7 sigma off (bench_corrected_calibration.py)."""
     last = corrected.get("last_update_sigma")
     if last is not None and last > CONVERGED_UPDATE_SIGMA:
+        ran = corrected.get("iterations") or iterations
         return (f"the re-fit of G and d with the named effects did not converge (last update {last:.3g} sigma after "
-                f"{corrected.get('iterations') or iterations} iterations): the named effects are too large for the extended model's linearisation")
+                f"{ran} iterations): the named effects are too large for the extended model's linearisation")
     if corrected.get("beyond_series_bound"):
         return ("re-fitted beyond the range where their model holds: " + ", ".join(corrected["beyond_series_bound"]))
     return ""
