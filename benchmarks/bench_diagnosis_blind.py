@@ -326,11 +326,15 @@ def impulse_plan(count: int, seed: int, model: NominalModel, duration_s: float, 
 
 def impulse_scores(results: list[dict]) -> dict:
     """Impulses: found (an event within 0.2 s of the drawn time) per SNR band, the time and L errors, the
-    verdict; clean sets with a reported impulse."""
+    verdict; clean sets with a reported impulse, and the other sets without a drawn impulse that report one."""
     rows = [r for r in results if r["kind"] == "impulse"]
     clean = [r for r in results if r["kind"] == "clean"]
+    # the other sets hold no impulse either: one reported there is false, whatever else the set holds
+    others = [r for r in results if r["kind"] not in ("impulse", "clean")]
     out: dict = {"impulse_sets": len(rows),
-                 "clean_with_an_impulse": sum(bool(r["impulses"]) for r in clean) / max(len(clean), 1)}
+                 "clean_with_an_impulse": sum(bool(r["impulses"]) for r in clean) / max(len(clean), 1),
+                 "other_sets_with_an_impulse": f"{sum(bool(r['impulses']) for r in others)}/{len(others)}",
+                 "other_sets_impulses_max": max((len(r["impulses"]) for r in others), default=0)}
     found, dt_err, z = {}, [], []
     for r in rows:
         spec = r["drawn"][0]["spec"]

@@ -220,3 +220,22 @@ def test_a_stack_of_variants_of_one_family_is_not_named():
     pair = [_report(f"cc[{v}]", 0.9, 5.0, "cross_coupling", v) for v in ("a", "b")[:FAMILY_VARIANTS_MAX]]
     named, rejected = standing_verdict(pair, unexplained=False)
     assert named == pair and rejected == {}
+
+
+def test_a_gap_in_other_channels_does_not_raise_the_held_out_threshold():
+    """Beside a gap unexplained in torque_z, an effect whose cells lie in the linear channels keeps the plain
+    rule (blind seed 14, set 21: a c.m. drift, z 1.1, expected 1.4, beside a timing remainder); one with a
+    cell in the gap's channel, or without cells, is held to the raised threshold."""
+    def report(key, channels):
+        out = _report(key, 0.9, 1.1, expected=1.4)
+        out.cells = [{"channel": channel} for channel in channels]
+        return out
+
+    apart, shaving, unknown = (report("drift", ["lin_diff_z", "lin_common_z"]),
+                               report("gain", ["torque_z", "lin_diff_z"]), report("other", []))
+    named, rejected = standing_verdict([apart, shaving, unknown], unexplained=True, gap_channels={"torque_z"})
+    assert named == [apart] and set(rejected) == {"gain", "other"}
+    assert all("not confirmed" in reason for reason in rejected.values())
+    # the gap's channels unknown: every effect beside it is held to the raised threshold
+    named, rejected = standing_verdict([report("drift", ["lin_diff_z"])], unexplained=True)
+    assert not named and "not confirmed" in rejected["drift"]

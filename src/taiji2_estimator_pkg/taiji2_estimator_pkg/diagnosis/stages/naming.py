@@ -135,7 +135,8 @@ def _apply_naming_rule(verdict: dict[str, Any], reports: Sequence[EffectReport],
                        ) -> None:
     """Name only the effects that stand on their own; say first where an unexplained gap sits (updates ``verdict``)."""
     families = [f["family"] for f in verdict.get("families", []) if f["stands"]]
-    named, rejected = standing_verdict(reports, bool(verdict["unexplained"]), families)
+    gap_channels = {location.channel for location in remaining} if remaining else None
+    named, rejected = standing_verdict(reports, bool(verdict["unexplained"]), families, gap_channels)
     if not rejected:
         return
     names = list(dict.fromkeys(report.name for report in named))
