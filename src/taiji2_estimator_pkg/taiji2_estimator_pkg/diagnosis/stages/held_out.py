@@ -5,9 +5,9 @@ An effect that starts mid-run is held out within its own span: the training part
 after the latest modelled onset (and all before it), the rest is held out. An effect present from the
 start is held out on the plain split of the whole run where every modelled onset lies at least a
 maneuver period before it (each effect with an onset then has data on both sides): held out after
-the latest onset too, a star-tracker noise beside a scale-factor drift from 5,800 s was tested on
-the last 1,670 s, where a 1-3 mHz excess has a handful of bins, and refused (z = -1.2; blind seed 13,
-set 17).
+the latest onset too, a star-tracker noise drawn at 9.4 sigma beside a scale-factor drift from 5,950 s
+was tested on the last 1,650 s, where a 1-3 mHz excess has a handful of bins, and refused (blind seed
+15, set 7); on the last 3,600 s it is named.
 """
 
 from __future__ import annotations
