@@ -49,12 +49,13 @@ class Aliases:
         """Variants (other than itself) whose signature correlates above the threshold.
 
         A candidate with a modelled onset is compared with the other variants started at the same onset
-        (a torque gain from t0 and an inertia error from t0 are as alike as from the start). From an onset
-        no exact timing scan is run, so a timing variant is compared with the other timing variants by their
-        first-order columns there: a delay and a lag both shift the thrust by -tau d(torque)/dt (a 5.7-ms
+        (a torque gain from t0 and an inertia error from t0 are as alike as from the start). From an
+        onset no exact timing scan is run, so a knot timing variant (the delays, the lag) is compared
+        with the other timing variants by their first-order columns there: a delay and a lag both shift the thrust by -tau d(torque)/dt (a 5.7-ms
         delay from 5,404 s, named as a 7.2-ms lag from 5,483 s, had no alias: blind seed 13, set 21; only the
         two delay families were compared), and the star tracker's part tells the delay families apart.
-        A non-timing variant is not compared with the timing variants from an onset.
+        A variant with linear columns (every non-timing one, and the star-tracker offset) is not compared
+        with the knot timing variants from an onset.
         """
         i = self.position.get(candidate.key)
         if i is None:
@@ -76,8 +77,10 @@ class Aliases:
 
     def _of_at_onset(self, candidate: Candidate, onset_s: float) -> list[str]:
         record = self.record
-        timing = candidate.grid is not None
-        others = [c for c in self.single if c.key != candidate.key and (c.grid is None or timing)]
+        # a knot (exact-scan) timing variant meets the other knot variants here; every variant with linear
+        # columns (the star-tracker offset among them) meets all the variants with linear columns
+        knots = candidate.grid is not None
+        others = [c for c in self.single if c.key != candidate.key and (c.grid is None or knots)]
         fixed = record.design.conditioned(record.indices(record.nuisance))
         own = record.column_ffts(candidate)
         own_power = float(fixed.projected_gram(record.whitener, own)[0, 0])
