@@ -51,9 +51,10 @@ class Aliases:
         A candidate with a modelled onset is compared with the other variants started at the same onset
         (a torque gain from t0 and an inertia error from t0 are as alike as from the start). From an
         onset no exact timing scan is run, so a knot timing variant (the delays, the lag) is compared
-        with the other timing variants by their first-order columns there: a delay and a lag both shift the thrust by -tau d(torque)/dt (a 5.7-ms
-        delay from 5,404 s, named as a 7.2-ms lag from 5,483 s, had no alias: blind seed 13, set 21; only the
-        two delay families were compared), and the star tracker's part tells the delay families apart.
+        with the other timing variants by their first-order columns there: a delay and a lag both shift
+        the thrust by -tau d(torque)/dt (a 5.7-ms delay from 5,404 s, named as a 7.2-ms lag from 5,483 s,
+        had no alias: blind seed 13, set 21; only the two delay families were compared), and the star
+        tracker's part tells the delay families apart.
         A variant with linear columns (every non-timing one, and the star-tracker offset) is not compared
         with the knot timing variants from an onset.
         """
