@@ -11,16 +11,21 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy.stats import chi2 as chi2_dist
+from scipy.stats import norm
 
 from taiji2_estimator_pkg.diagnosis import align_streams, diagnose, prepare_input
 from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES
 from taiji2_estimator_pkg.diagnosis.partners import jointly_determined
 from taiji2_estimator_pkg.diagnosis.standing import (
     FAMILY_VARIANTS_MAX,
+    HELDOUT_POWER_MARGIN,
     HELDOUT_Z_MIN,
     HELDOUT_Z_MIN_UNEXPLAINED,
     SHRINK_MIN,
+    is_fluctuation,
     standing_verdict,
+    unconfirmed_floor,
 )
 from taiji2_model.config import load_config
 from taiji2_model.effect_catalog import make_effect
@@ -161,9 +166,10 @@ def test_align_streams_removes_a_constant_stamp_phase():
     np.testing.assert_array_equal(inp.voltages_v, out.voltages_v)
 
 
-def _report(key, shrink, heldout_z, name="", variant="", expected=None):
+def _report(key, shrink, heldout_z, name="", variant="", expected=None, delta_chi2=1e3, n_params=1):
     return SimpleNamespace(key=key, name=name or key, variant=variant, accepted=True, rejected=None, shrink=shrink,
-                           heldout_z=heldout_z, heldout_expected_z=expected)
+                           heldout_z=heldout_z, heldout_expected_z=expected, delta_chi2=delta_chi2,
+                           n_params=n_params)
 
 
 def test_naming_rule():
@@ -239,3 +245,26 @@ def test_a_gap_in_other_channels_does_not_raise_the_held_out_threshold():
     # the gap's channels unknown: every effect beside it is held to the raised threshold
     named, rejected = standing_verdict([report("drift", ["lin_diff_z"])], unexplained=True)
     assert not named and "not confirmed" in rejected["drift"]
+
+
+def test_an_effect_the_held_out_part_cannot_confirm_needs_the_floor_at_the_confirmed_level():
+    """Rule 2b: where the held-out part cannot confirm an effect (expected z < HELDOUT_Z_MIN + 2), its gain must
+    pass the selection floor at level x HELDOUT_NULL_PASS, whatever its held-out z (blind seed 16: drifts at
+    3.8-4.1 sigma with z 1.0-2.3, in 3 of 156 sets); refused, it is a fluctuation, not a gap."""
+    level = 1e-4  # alpha 1 % over 100 candidates: the selection floor is chi2_1 15.1
+    floor = unconfirmed_floor(level, 1)
+    assert floor == pytest.approx(float(chi2_dist.isf(level * norm.sf(HELDOUT_Z_MIN), 1)))
+    assert 18.0 < floor < 19.0 and unconfirmed_floor(level, 2) > floor
+    at_floor = _report("drift", 1.0, 1.1, expected=1.2, delta_chi2=15.2)
+    above = _report("strong_drift", 1.0, 0.4, expected=2.2, delta_chi2=floor + 0.5)
+    confirmable = _report("gain", 1.0, 1.1, expected=HELDOUT_Z_MIN + HELDOUT_POWER_MARGIN, delta_chi2=15.2)
+    named, rejected = standing_verdict([at_floor, above, confirmable], unexplained=False, level=level)
+    assert named == [above, confirmable] and set(rejected) == {"drift"}
+    assert is_fluctuation(rejected["drift"]) and not at_floor.accepted
+    # without a level (the rule not asked for) the effect at the floor stands
+    named, _ = standing_verdict([_report("drift", 1.0, 1.1, expected=1.2, delta_chi2=15.2)], unexplained=False)
+    assert [r.key for r in named] == ["drift"]
+    # other refusals are no fluctuations
+    named, rejected = standing_verdict([_report("x", 0.9, 0.6, expected=HELDOUT_Z_MIN + 3.0)], unexplained=False,
+                                       level=level)
+    assert not is_fluctuation(rejected["x"])

@@ -81,7 +81,7 @@ from taiji2_model.effect_catalog import (
 from taiji2_model.frames import cross
 
 __all__ = ["FAMILIES", "ONSET_KINDS", "TIMING_FAMILIES", "Candidate", "CandidateContext", "NoiseCandidate",
-           "candidate_catalog"]
+           "candidate_catalog", "readout_change"]
 
 FAMILIES = ("scale_factor_drift", "cross_coupling", "time_offset", "star_tracker_lowfreq_noise",
             "thruster_torque_gain", "com_drift", "readout_nonlinearity", "inertia_error", "gravity_gradient",
@@ -92,10 +92,11 @@ unknown time is found by its own matched filter in the final residual, :mod:`.im
 TIMING_FAMILIES = ("time_offset", "actuation_delay", "thruster_response", "grs_time_offset")
 """Families that are timing conventions (stamps, latency, thrust response), not physics."""
 
-ONSET_KINDS = {family: "step" for family in (*FAMILIES, "impulse")}
+ONSET_KINDS = {family: "step" for family in (*FAMILIES, "impulse", "readout_step")}
 ONSET_KINDS.update({"scale_factor_drift": "ramp", "com_drift": "ramp"})
 """How each family starts mid-run (docs/diagnosis.md): a drift starts drifting (``ramp``: its clock starts at
-the onset), everything else switches on (``step``: the change is zero before the onset)."""
+the onset), everything else switches on (``step``: the change is zero before the onset). Also the naming rule's
+rival of a nonlinearity from an onset, a step of its readout (:mod:`.readout_step`; no catalog effect)."""
 
 DELAY_RANGE_S = TIMING_REACH_S
 """Timing candidates are scanned over +-0.5 s around the model's delay (and 0 .. 1 s of lag)."""
@@ -490,12 +491,15 @@ NONLINEARITY_LEADING_BOUND = 0.05
 _CATALAN = [math.comb(2 * n, n) // (n + 1) for n in range(NONLINEARITY_SERIES_TERMS + 2)]
 
 
+def readout_change(ctx: CandidateContext, grs: int, readout: str, readout_series: np.ndarray) -> np.ndarray:
+    """The (n, 15) channel change of ``readout_series`` added to GRS ``grs``'s (0 or 1) measured ``readout``
+    (one of :data:`.channels.LINEAR_READOUTS` or :data:`.channels.ANGULAR_READOUTS`; SI units)."""
+    if readout in ANGULAR_READOUTS:
+        return _perturb(ctx, dg=_tmrf_to_crf_column(ctx, grs, ANGULAR_READOUTS.index(readout), readout_series))
+    return _perturb(ctx, dl=_tmrf_to_crf_column(ctx, grs, LINEAR_READOUTS.index(readout), readout_series))
+
+
 def _nonlinearity(grs: int, readout: str) -> Candidate:
-    def readout_change(ctx: CandidateContext, readout_series: np.ndarray) -> np.ndarray:
-        """The channels of ``readout_series`` added to the measured readout."""
-        if readout in ANGULAR_READOUTS:
-            return _perturb(ctx, dg=_tmrf_to_crf_column(ctx, grs, ANGULAR_READOUTS.index(readout), readout_series))
-        return _perturb(ctx, dl=_tmrf_to_crf_column(ctx, grs, LINEAR_READOUTS.index(readout), readout_series))
 
     def measured(ctx: CandidateContext) -> np.ndarray:
         if readout in ANGULAR_READOUTS:
@@ -504,12 +508,12 @@ def _nonlinearity(grs: int, readout: str) -> Candidate:
 
     def powers(ctx: CandidateContext, exponents: Sequence[int]) -> list[np.ndarray]:
         m = measured(ctx)
-        return [readout_change(ctx, m ** p) for p in exponents]
+        return [readout_change(ctx, grs, readout, m ** p) for p in exponents]
 
     def series_weighted(ctx: CandidateContext, weights: np.ndarray) -> np.ndarray:
         # sum_j w_j P(m^(j+2)) = P(m^2 sum_j w_j m^j): P is linear, one build instead of one per term
         m = measured(ctx)
-        return readout_change(ctx, m ** 2 * np.polynomial.polynomial.polyval(m, weights))
+        return readout_change(ctx, grs, readout, m ** 2 * np.polynomial.polynomial.polyval(m, weights))
 
     def build(ctx: CandidateContext) -> list[np.ndarray]:
         return powers(ctx, (2,))

@@ -13,10 +13,12 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from scipy.stats import chi2 as chi2_dist
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.impulses import Impulses
 from taiji2_estimator_pkg.diagnosis.locations import Location
+from taiji2_estimator_pkg.diagnosis.readout_step import StepRival, step_rivals
 from taiji2_estimator_pkg.diagnosis.record import Record
 from taiji2_estimator_pkg.diagnosis.results import EffectReport
 from taiji2_estimator_pkg.diagnosis.stages.final_scan import FinalModel, describe_locations
@@ -26,6 +28,7 @@ from taiji2_estimator_pkg.diagnosis.standing import (
     FAMILY_VARIANTS_MAX,
     SHRINK_MIN,
     family_group,
+    is_fluctuation,
     standing_verdict,
     subfamily_group,
 )
@@ -42,7 +45,9 @@ def name_effects(nominal: Nominal, selection: Selection, final: FinalModel, repo
                          nominal.log_n)
     if families:
         verdict["families"] = families
-    _apply_naming_rule(verdict, reports, final.remaining)
+    level = float(chi2_dist.sf(nominal.floor[1], 1))  # the selection floor's level per candidate
+    rivals = step_rivals(nominal.full, selection.accepted, final.current, nominal.floor[1])
+    _apply_naming_rule(verdict, reports, final.remaining, level, rivals)
     _name_impulses(verdict, final.impulses)
     return reports, verdict
 
@@ -131,12 +136,19 @@ def _redundant(reports: Sequence[EffectReport], named: Sequence[EffectReport], r
             and report.score < 0.0 and report.shrink is not None and report.shrink < SHRINK_MIN}
 
 
-def _apply_naming_rule(verdict: dict[str, Any], reports: Sequence[EffectReport], remaining: Sequence[Location]
-                       ) -> None:
-    """Name only the effects that stand on their own; say first where an unexplained gap sits (updates ``verdict``)."""
+def _apply_naming_rule(verdict: dict[str, Any], reports: Sequence[EffectReport], remaining: Sequence[Location],
+                       level: float, rivals: dict[str, StepRival]) -> None:
+    """Name only the effects that stand on their own; say first where an unexplained gap sits (updates ``verdict``).
+    ``level``: the selection floor's tail probability per candidate (naming rule 2b); ``rivals``: the
+    nonlinearities a step of their readout explains as well (naming rule 4, :mod:`..readout_step`)."""
     families = [f["family"] for f in verdict.get("families", []) if f["stands"]]
     gap_channels = {location.channel for location in remaining} if remaining else None
-    named, rejected = standing_verdict(reports, bool(verdict["unexplained"]), families, gap_channels)
+    for report in reports:
+        if report.accepted and report.key in rivals:
+            report.accepted, report.rejected = False, rivals[report.key].reason
+    named, rejected = standing_verdict(reports, bool(verdict["unexplained"]), families, gap_channels, level)
+    rivals = {key: rival for key, rival in rivals.items() if any(r.key == key for r in reports)}
+    rejected = {**{key: rival.reason for key, rival in rivals.items()}, **rejected}
     if not rejected:
         return
     names = list(dict.fromkeys(report.name for report in named))
@@ -146,21 +158,24 @@ def _apply_naming_rule(verdict: dict[str, Any], reports: Sequence[EffectReport],
         beside = next(r.key for r in named if r.name == family_of[key])
         rejected[key] = (f"redundant beside the named {beside}: the final model is better without it (drop-one BIC "
                          f"score {redundant[key]:.1f}); {rejected[key]}")
-    if len(redundant) == len(rejected):  # the verdict stands on the named effects (the final scan's, unchanged)
+    # no gap where they sit: made redundant by a named variant, or below the naming level (rule 2b)
+    quiet = set(redundant) | {key for key, reason in rejected.items() if is_fluctuation(reason)}
+    if len(quiet) == len(rejected) and names:  # the verdict stands on the named effects (the final scan's)
         verdict.update({"effects": names, "rejected": rejected, "accepted_variants": [r.key for r in named]})
         if verdict["summary"].startswith("explained by "):
             verdict["summary"] = "explained by " + ", ".join(names)
         return
-    if not names and not remaining and not verdict.get("significant_locations_before"):
-        # selected on the likelihood alone (no location stood out before, none after) and refused by the
-        # rule: a fluctuation of the noise, not a gap
+    if not names and not remaining and (len(quiet) == len(rejected) or not verdict.get("significant_locations_before")):
+        # selected on the likelihood alone (no location stood out before, none after) and refused by the rule,
+        # or below the naming level: a fluctuation of the noise, not a gap
         verdict.update({"effects": [], "unexplained": False, "summary": "no significant gap",
                         "accepted_variants": [], "rejected": rejected})
         return
-    cells = [cell for report in reports if report.key in rejected and report.key not in redundant
+    cells = [cell for report in reports if report.key in rejected and report.key not in quiet
              for cell in report.cells]
     where = describe_locations(remaining) if remaining else describe_locations(cells)
     summary = f"unexplained gap at {where}"
+    summary += "".join(f"; {rival.step} fits it as well as a readout nonlinearity" for rival in rivals.values())
     summary += f"; also found: {', '.join(names)}" if names else "; no catalog effect explains it"
     verdict.update({"effects": names, "unexplained": True, "summary": summary,
                     "accepted_variants": [report.key for report in named], "rejected": rejected})
