@@ -137,10 +137,11 @@ def _redundant(reports: Sequence[EffectReport], named: Sequence[EffectReport], r
 
 
 def _apply_naming_rule(verdict: dict[str, Any], reports: Sequence[EffectReport], remaining: Sequence[Location],
-                       level: float, rivals: dict[str, StepRival]) -> None:
+                       level: float | None = None, rivals: dict[str, StepRival] | None = None) -> None:
     """Name only the effects that stand on their own; say first where an unexplained gap sits (updates ``verdict``).
-    ``level``: the selection floor's tail probability per candidate (naming rule 2b); ``rivals``: the
-    nonlinearities a step of their readout explains as well (naming rule 4, :mod:`..readout_step`)."""
+    ``level``: the selection floor's tail probability per candidate (naming rule 2b; None: not applied);
+    ``rivals``: the nonlinearities a step of their readout explains as well (naming rule 4, :mod:`..readout_step`)."""
+    rivals = rivals or {}
     families = [f["family"] for f in verdict.get("families", []) if f["stands"]]
     gap_channels = {location.channel for location in remaining} if remaining else None
     for report in reports:
