@@ -39,7 +39,10 @@ naming them would be a confident wrong name. So an accepted effect is named only
    electrode imbalances). The family (all its variants, one GRS) is one candidate with its whole parameter count in the
    penalty: it stands when it is complete, or when the variants the stack lacks gain more than
    their BIC penalty (a full cross-talk matrix of which selection took four terms); a stack whose
-   family-level fit does not beat it is reported as an unexplained gap, not as a list of names.
+   family-level fit does not beat it is reported as an unexplained gap, not as a list of names;
+4. a readout nonlinearity from an onset gains beyond a step of its readout at that onset (the naming stage,
+   :mod:`.readout_step`): from an onset a nonlinearity of a square-wave readout is mostly that step, which
+   the catalog does not hold.
 
 An effect that fails is reported with ``accepted = false`` and the reason; the gap it was
 selected for is then part of the unexplained verdict.
