@@ -17,6 +17,7 @@ import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.dynamics import ResponseFit
+from taiji2_estimator_pkg.diagnosis.family_completion import complete_families
 from taiji2_estimator_pkg.diagnosis.impulses import Impulses, detect_impulses, impulse_candidate, search_input
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.joint_timing import (
@@ -88,11 +89,20 @@ def final_scan(inp: DiagnosisInput, nominal: Nominal, where: Where, selection: S
         theta_final, cov_final, chi2_final = full.fit(current)
         theta_scan = _with_detected(current, theta_final, impulses, full.model)
         response = full.response(current, theta_scan)[1]
+    completed = complete_families(full, nominal.candidates, accepted, current, nominal.log_n)
+    scanned = current
+    if completed:  # the scan sees each completed family whole (..family_completion)
+        scanned = current + [name for keys in completed.values() for key in keys
+                             for name in full.candidates[key].column_names()]
+        theta_scan = _with_detected(scanned, full.fit(scanned)[0], impulses, full.model)
+        say("completed for the scan: " + ", ".join(f"{group} (+{len(keys)})" for group, keys in completed.items()))
     say("scanning the residual with the accepted effects")
     readout_response = response.to_dict()
-    after = scan(full, where.grid, inp.t_s, current, theta_scan, full.kappa, options)
+    after = scan(full, where.grid, inp.t_s, scanned, theta_scan, full.kappa, options)
     remaining, verdict = _verdict(where.before, after, accepted, options)
     verdict.update({"chi2_nominal": nominal.chi2, "chi2_final": chi2_final})
+    if completed:
+        verdict["completed_families"] = completed
     return FinalModel(current, theta_final, cov_final, chi2_final, impulses, readout_response, after, remaining,
                       verdict)
 
