@@ -22,7 +22,7 @@ import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.record import Record
-from taiji2_estimator_pkg.diagnosis.standing import FAMILY_VARIANTS_MAX, family_group, subfamily_group
+from taiji2_estimator_pkg.diagnosis.standing import FAMILY_VARIANTS_MAX, family_group, family_stacks, subfamily_group
 
 __all__ = ["complete_families"]
 
@@ -53,11 +53,7 @@ def complete_families(full: Record, candidates: Sequence[Candidate], accepted: S
     columns = list(current)
     chi2_current = full.chi2(columns)
     for grouping in (family_group, subfamily_group):  # the whole family, then its parts of one physics
-        groups: dict[str, list[Candidate]] = {}
-        for candidate in accepted:
-            if isinstance(candidate, Candidate) and not candidate.is_timing and candidate.variant:
-                groups.setdefault(grouping(candidate.name, candidate.variant), []).append(candidate)
-        for group, members in groups.items():
+        for group, members in family_stacks(accepted, grouping).items():
             if len(members) <= FAMILY_VARIANTS_MAX or any(
                     family_group(members[0].name, members[0].variant) == done for done in completed):
                 continue

@@ -50,14 +50,15 @@ selected for is then part of the unexplained verdict.
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from typing import Any
 
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 
 __all__ = ["FAMILY_VARIANTS_MAX", "HELDOUT_CONTRADICTION", "HELDOUT_NULL_PASS", "HELDOUT_POWER_MARGIN",
-           "HELDOUT_Z_MIN", "HELDOUT_Z_MIN_UNEXPLAINED", "SHRINK_MIN", "family_group", "is_fluctuation",
+           "HELDOUT_Z_MIN", "HELDOUT_Z_MIN_UNEXPLAINED", "SHRINK_MIN", "family_group", "family_stacks",
+           "is_fluctuation",
            "standing_verdict", "subfamily_group", "unconfirmed_floor"]
 
 SHRINK_MIN = 0.5
@@ -88,6 +89,16 @@ def family_group(name: str, variant: str) -> str:
     """The physical family a variant belongs to: the effect on one GRS (``cross_coupling[grs1]``,
     ``com_drift[both]``, ``thruster_force_leakage[Fx]``) or the whole effect (``thruster_torque_gain``)."""
     return f"{name}[{variant.split('.')[0]}]" if "." in variant else name
+
+
+def family_stacks(accepted: Sequence[Any], grouping: Callable[[str, str], str]) -> dict[str, list[Any]]:
+    """The accepted physical variants (not timing, with a variant) by family (``grouping``: :func:`family_group`
+    or :func:`subfamily_group`), in their order."""
+    groups: dict[str, list[Any]] = {}
+    for candidate in accepted:
+        if getattr(candidate, "variant", "") and not getattr(candidate, "is_timing", True):
+            groups.setdefault(grouping(candidate.name, candidate.variant), []).append(candidate)
+    return groups
 
 
 def subfamily_group(name: str, variant: str) -> str:

@@ -28,6 +28,7 @@ from taiji2_estimator_pkg.diagnosis.standing import (
     FAMILY_VARIANTS_MAX,
     SHRINK_MIN,
     family_group,
+    family_stacks,
     is_fluctuation,
     standing_verdict,
     subfamily_group,
@@ -85,12 +86,8 @@ def _families(full: Record, candidates: Sequence[Candidate], accepted: Sequence[
     """
     out = []
     for grouping in (family_group, subfamily_group):  # the whole family, then its parts of one physics
-        groups: dict[str, list[Candidate]] = {}
-        for candidate in accepted:
-            if isinstance(candidate, Candidate) and not candidate.is_timing and candidate.variant:
-                groups.setdefault(grouping(candidate.name, candidate.variant), []).append(candidate)
         standing = {f["family"] for f in out if f["stands"]}
-        for group, members in groups.items():
+        for group, members in family_stacks(accepted, grouping).items():
             if len(members) <= FAMILY_VARIANTS_MAX or group in {f["family"] for f in out}:
                 continue
             if grouping is subfamily_group and family_group(members[0].name, members[0].variant) in standing:
