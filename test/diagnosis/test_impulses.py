@@ -62,6 +62,29 @@ def test_an_snr_8_impulse_is_found_at_its_sample(model):
     assert found >= 45, found
 
 
+def test_a_mean_or_slow_residual_is_no_impulse_and_an_impulse_on_it_keeps_its_size(model):
+    """A mean torque (the fit drops the DC bin: a gravity gradient's constant part stays in the residual) of
+    (1.2, -1.4, 0.8) sigma makes the statistic non-central (lambda 4: about 7 samples of a 20,000-sample record
+    above the threshold), and a slow bump of 3 sigma adds to it; the local mean (BASELINE_HALF_WINDOW_S) takes both
+    out. An SNR-10 impulse on the bump is found at its sample, its amplitude within 4 sigma of the injected one."""
+    rng = np.random.default_rng(10)
+    t_s = 0.1 * np.arange(1, N + 1)
+    keep = np.ones(N, dtype=bool)
+    residual = _white(rng)
+    residual[:, 3:6] += np.array([1.2, -1.4, 0.8]) * SIGMA_TORQUE
+    top = 9000
+    residual[:, 3:6] += 3.0 * SIGMA_TORQUE * np.exp(-0.5 * ((np.arange(N) - top) * 0.1 / 60.0) ** 2)[:, None]
+    assert not detect_impulses(residual, None, model, t_s, keep).events
+    kick = 10.0 * SIGMA_TORQUE * np.array([0.0, 0.6, 0.8])
+    residual[top, 3:6] += kick
+    (event,) = detect_impulses(residual, None, model, t_s, keep).events
+    assert event.index == top
+    inertia_inv = np.linalg.inv(model.inertia_kg_m2)
+    measured = inertia_inv @ event.angular_momentum_n_m_s / 0.1
+    sigma = np.sqrt(np.diag(inertia_inv @ event.angular_momentum_cov @ inertia_inv.T)) / 0.1
+    assert np.all(np.abs(measured - kick) < 4.0 * sigma), (measured, kick, sigma)
+
+
 def test_a_modelled_step_is_not_searched_for_an_impulse(model):
     """A large SNR-20 spike at a modelled step onset (the step's transient through the readout chain) is not
     reported; the same spike 10 s later is."""

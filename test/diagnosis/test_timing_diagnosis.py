@@ -166,10 +166,10 @@ def test_align_streams_removes_a_constant_stamp_phase():
     np.testing.assert_array_equal(inp.voltages_v, out.voltages_v)
 
 
-def _report(key, shrink, heldout_z, name="", variant="", expected=None, delta_chi2=1e3, n_params=1):
+def _report(key, shrink, heldout_z, name="", variant="", expected=None, delta_chi2=1e3, n_params=1, z_sd=None):
     return SimpleNamespace(key=key, name=name or key, variant=variant, accepted=True, rejected=None, shrink=shrink,
-                           heldout_z=heldout_z, heldout_expected_z=expected, delta_chi2=delta_chi2,
-                           n_params=n_params)
+                           heldout_z=heldout_z, heldout_expected_z=expected, heldout_z_sd=z_sd,
+                           delta_chi2=delta_chi2, n_params=n_params)
 
 
 def test_naming_rule():
@@ -196,6 +196,19 @@ def test_a_held_out_part_too_weak_to_confirm_an_effect_refuses_it_only_where_it_
     # beside an unexplained gap the rule stays as it was (partial explanations)
     named, rejected = standing_verdict([_report("y", 0.9, 0.6, expected=2.2)], unexplained=True)
     assert not named and "not confirmed" in rejected["y"]
+
+
+def test_a_contradiction_is_measured_against_the_spread_the_trained_magnitude_gives():
+    # a gravity gradient's x and z components trained on 2 h and extrapolated to the last hour read
+    # z = -2.4 where 2.6 was expected (blind seed 17, set 11): 5 below it, with the training error s = 2.4
+    extrapolated = _report("gravity_gradient[z]", 0.99, -2.4, expected=2.6, z_sd=2.4)
+    exact = _report("same_reading_exact_training", 0.99, -2.4, expected=2.6, z_sd=1.0)
+    named, rejected = standing_verdict([extrapolated, exact], unexplained=False)
+    assert named == [extrapolated] and "contradicted" in rejected["same_reading_exact_training"]
+    # 3 spreads below still contradicts
+    named, rejected = standing_verdict([_report("far", 0.99, 2.6 - 3.1 * 2.4, expected=2.6, z_sd=2.4)],
+                                       unexplained=False)
+    assert not named and "+- 2.4" in rejected["far"]
 
 
 def test_partners_are_effects_whose_magnitudes_correlate_almost_perfectly():

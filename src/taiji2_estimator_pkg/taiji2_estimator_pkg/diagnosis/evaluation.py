@@ -16,7 +16,13 @@ Definitions (``docs/diagnosis.md``):
   against "no effect" (G_ho ~ N(-P, 4P), P the held-out power of the trained signature; for the
   star-tracker noise, the mean and std of G_ho with no extra noise, ``Record.noise_gain_null``); with the
   effect present at its trained magnitude G_ho ~ N(P, 4P), so ``heldout_z`` ~ N(sqrt(P), 1):
-  ``heldout_expected_z = sqrt(P)`` says how strongly the held-out part could confirm it at all.
+  ``heldout_expected_z = sqrt(P)`` says how strongly the held-out part could confirm it at all. That
+  expectation holds for the trained magnitude taken as exact; its training error e ~ N(0, C_tr) moves
+  ``heldout_z`` by ``-e^T M theta / sqrt(P)`` (M the held-out information on the effect's values, the
+  others fitted there), so with the effect present ``heldout_z`` ~ N(sqrt(P), s^2),
+  ``heldout_z_sd = s = sqrt(1 + theta^T M C_tr M theta / P)``: large where the held-out part is an
+  extrapolation of a poorly trained signature (a gravity gradient, a quarter of its 2n period in 3 h).
+  "No effect" (the confirmation) stays exact: G_ho ~ N(-P, 4P) whatever the trained magnitude.
 """
 
 from __future__ import annotations
@@ -167,7 +173,12 @@ def held_out_deterministic(train: Record, test: Record, candidate: Candidate, ot
                                                                    np.concatenate((beta, theta_e)))
     cells = signature_cells(test, np.abs(change) ** 2 / marginal, band_edges_hz, period_s, halfwidth)
     remaining = excess(test.residual_fft(list(others) + names, theta_best), marginal, cells)
-    power = test.projected_power(others, names, theta_e)
+    # M: the held-out part's information on the effect's values, the others fitted there; P = theta_e^T M theta_e
+    information = test.projected_gram(others, names)
+    power = float(theta_e @ information @ theta_e)
+    # the trained error e ~ N(0, C_tr) moves z by -e^T M theta_e / sqrt(P): Var = theta_e^T M C_tr M theta_e / P
+    leverage = information @ theta_e
+    training_variance = float(leverage @ cov_tr[-len(names):, -len(names):] @ leverage) / power if power > 0 else 0.0
     denominator = max(gain_best + max(remaining, 0.0), floor)
     return {
         "magnitude_train": magnitude, "sigma_train": sigma,
@@ -175,6 +186,7 @@ def held_out_deterministic(train: Record, test: Record, candidate: Candidate, ot
         "shrink_heldout": gain_fixed / denominator if denominator > 0 else None,
         "heldout_z": (gain_fixed + power) / (2.0 * math.sqrt(power)) if power > 0 else None,
         "heldout_expected_z": math.sqrt(power) if power > 0 else None,
+        "heldout_z_sd": math.sqrt(1.0 + training_variance) if power > 0 else None,
     }
 
 

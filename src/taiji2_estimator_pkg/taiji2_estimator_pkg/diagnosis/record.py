@@ -330,16 +330,24 @@ class Record:
         beta = self.design.solve_with_offset(idx, o, theta_fixed)
         return beta, self.design.chi2_with_offset(idx, o, theta_fixed)
 
-    def projected_power(self, free: Sequence[str], fixed: Sequence[str], theta_fixed: np.ndarray) -> float:
-        """Whitened power of ``X_fixed theta`` after projecting out the free columns."""
+    def projected_gram(self, free: Sequence[str], fixed: Sequence[str]) -> np.ndarray:
+        """Whitened Gram matrix of the ``fixed`` columns after projecting out the ``free`` ones:
+        ``M = X_o^T X_o - X_o^T X_f (X_f^T X_f)^-1 X_f^T X_o``, the Fisher information of the fixed
+        columns' values with the free ones fitted."""
         idx, o = self.indices(free), self.indices(fixed)
         gram = self.design.gram
-        theta = np.asarray(theta_fixed, dtype=np.float64)
-        cross_term = gram[np.ix_(idx, o)] @ theta
+        cross_term = gram[np.ix_(idx, o)]
         g_ff = gram[np.ix_(idx, idx)]
         scale = np.sqrt(np.maximum(np.diag(g_ff), 1e-300))
-        solved = np.linalg.solve(g_ff / np.outer(scale, scale) + 1e-13 * np.eye(idx.size), cross_term / scale) / scale
-        return float(theta @ gram[np.ix_(o, o)] @ theta - cross_term @ solved)
+        solved = np.linalg.solve(g_ff / np.outer(scale, scale) + 1e-13 * np.eye(idx.size),
+                                 cross_term / scale[:, None]) / scale[:, None]
+        return gram[np.ix_(o, o)] - cross_term.T @ solved
+
+    def projected_power(self, free: Sequence[str], fixed: Sequence[str], theta_fixed: np.ndarray) -> float:
+        """Whitened power of ``X_fixed theta`` after projecting out the free columns: ``theta^T M theta``
+        (:meth:`projected_gram`)."""
+        theta = np.asarray(theta_fixed, dtype=np.float64)
+        return float(theta @ self.projected_gram(free, fixed) @ theta)
 
     # time domain --------------------------------------------------------------------------
     def ctx_of(self, candidate: Candidate, onset_s: float | str | None = "current") -> CandidateContext:

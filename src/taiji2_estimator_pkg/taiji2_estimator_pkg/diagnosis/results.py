@@ -41,6 +41,9 @@ class EffectReport:
     heldout_expected_z : float or None
         ``heldout_z`` expected with the effect present at its trained magnitude (sqrt of its held-out power):
         below ``HELDOUT_Z_MIN + 2`` the held-out part cannot confirm it (:mod:`.standing`).
+    heldout_z_sd : float or None
+        Standard deviation of ``heldout_z`` with the effect present, the training error of its magnitude
+        included (1 where that error is negligible; :mod:`.evaluation`).
     magnitude_train, sigma_train : float or None
         Fit on the training part.
     parameters : dict
@@ -75,6 +78,7 @@ class EffectReport:
     heldout_delta_chi2_best: float | None = None
     heldout_z: float | None = None
     heldout_expected_z: float | None = None
+    heldout_z_sd: float | None = None
     magnitude_train: float | None = None
     sigma_train: float | None = None
     parameters: dict[str, Any] = field(default_factory=dict)
@@ -100,7 +104,7 @@ class EffectReport:
             "shrink": _num(self.shrink), "shrink_heldout": _num(self.shrink_heldout),
             "heldout_delta_chi2": _num(self.heldout_delta_chi2),
             "heldout_delta_chi2_best": _num(self.heldout_delta_chi2_best), "heldout_z": _num(self.heldout_z),
-            "heldout_expected_z": _num(self.heldout_expected_z),
+            "heldout_expected_z": _num(self.heldout_expected_z), "heldout_z_sd": _num(self.heldout_z_sd),
             "magnitude_train": _num(self.magnitude_train), "sigma_train": _num(self.sigma_train),
             "parameters": self.parameters, "aliases": self.aliases, "partners": self.partners, "g_shift": self.g_shift,
             "d_shift": self.d_shift, "cells": self.cells, "injection": self.injection,
