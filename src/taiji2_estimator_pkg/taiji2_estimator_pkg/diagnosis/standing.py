@@ -23,8 +23,9 @@ naming them would be a confident wrong name. So an accepted effect is named only
    an expected z of 2.2, read 0.6, and was refused before this rule. The standard deviation includes the
    trained magnitude's own error (:mod:`.evaluation`), which dominates where the held-out part extrapolates a
    poorly trained signature: a gravity gradient's x and z components, trained on 2 h (a quarter of their
-   period), read z = -2.4 to -4.0 where 0.8-2.6 were expected (z's spread 2.2-2.5 where measured), and were refused in all
-   5 sets of blind seeds 16 and 17 where they were selected, each leaving a sub-mHz torque gap;
+   period), read z = -2.4 to -4.0 where 0.8-2.6 were expected (z's spread 2.2-2.5 where measured), and
+   were refused in all 5 sets of blind seeds 16 and 17 where they were selected, each leaving a sub-mHz
+   torque gap;
 2b. an effect the held-out part cannot confirm (expected z below ``HELDOUT_Z_MIN + HELDOUT_POWER_MARGIN`` sds, as
    above) stands on its in-sample evidence alone, so that evidence must carry the false-alarm level the
    confirmation would have given: its drop-one gain in the final model must pass the selection floor's
