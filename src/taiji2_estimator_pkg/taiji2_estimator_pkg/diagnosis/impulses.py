@@ -141,18 +141,16 @@ class Impulses:
 
 def chain_kernel(response: ResponseFit | None, dt_s: float) -> np.ndarray:
     """(3, 2 h + 1) impulse response of the readout chain per CRF axis, taps -h..h (h = 4), from the
-    fitted R(f) = 1 + b1 x - b2 x^2 - i delta sin(2 pi f dt) / dt, x = (2 sin(pi f dt))^2 (:mod:`.dynamics`)."""
+    fitted R(f) (:meth:`.dynamics.ResponseFit.frequency_response_minus_one`)."""
     kernel = np.zeros((3, 2 * _KERNEL_HALF + 1))
     kernel[:, _KERNEL_HALF] = 1.0
     if response is None:
         return kernel
     size = 64
     frequencies = np.fft.fftfreq(size, dt_s)
-    x = (2.0 * np.sin(np.pi * frequencies * dt_s)) ** 2
+    h = response.frequency_response_minus_one(frequencies)
     for axis in range(3):
-        b1, b2, delta = response.coefficients[axis]
-        h = b1 * x - b2 * x * x - 1j * delta * np.sin(2.0 * np.pi * frequencies * dt_s) / dt_s
-        taps = np.real(np.fft.ifft(1.0 + h))
+        taps = np.real(np.fft.ifft(1.0 + h[axis]))
         kernel[axis] = np.roll(taps, _KERNEL_HALF)[:2 * _KERNEL_HALF + 1]
     return kernel
 
