@@ -20,7 +20,8 @@ b3 = -0.059 to -0.062 (+- 0.0016 on z, the axis with the largest steps) and delt
 (+- 0.0003 s); set 104, b3 = 0.023-0.032 and delta_xx = 0.0086-0.0102 s; in the standard fidelity (the
 model's own chain) they are 0 within 1.6 sigma. Without them each command change of z left a residual of
 -8.6, +4.3, -2 sigma in its samples, read as a 0.3-1 or 1-5 Hz torque_z gap in 6 of the 9 reference pairs of
-blind seed 16 that were not fully explained; with them 5 of those 6 are. Below ``f_max`` nothing changes: the
+blind seed 16 that were not fully explained; with them none of the 6 leaves a gap (5 have both effects
+named; set 76 misses its 4.4-sigma c.m. drift). Below ``f_max`` nothing changes: the
 timing and physical candidates are selected and located there, and a delay the model lacks still
 shows as a gap in the torque channel at the maneuver's harmonics below f_max. The cost: an effect
 that only shows in the torque channel above f_max is not located. The coefficients (delays in
