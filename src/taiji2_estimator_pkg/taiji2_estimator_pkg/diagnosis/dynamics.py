@@ -30,8 +30,6 @@ seconds) are reported with the calibration (:data:`TERMS`).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
@@ -65,10 +63,8 @@ class ResponseFit:
         self.dt_s = dt_s
 
     def amplitude_minus_one(self, frequency_hz: float) -> np.ndarray:
-        """(3,) |R(f)| - 1 per axis, to first order, at ``frequency_hz``."""
-        x = (2.0 * math.sin(math.pi * frequency_hz * self.dt_s)) ** 2
-        b1, b2, b3 = self.coefficients[:, 0], self.coefficients[:, 1], self.coefficients[:, 2]
-        return b1 * x - b2 * x * x + b3 * x ** 3
+        """(3,) |R(f)| - 1 per axis, to first order (the real part of R - 1), at ``frequency_hz``."""
+        return self.frequency_response_minus_one(np.array([frequency_hz]))[:, 0].real
 
     def frequency_response_minus_one(self, frequency_hz: np.ndarray) -> np.ndarray:
         """(3, m) R(f) - 1 per axis at the frequencies (m,) [Hz]."""

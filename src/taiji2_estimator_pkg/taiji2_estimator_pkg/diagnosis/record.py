@@ -343,12 +343,6 @@ class Record:
                                  cross_term / scale[:, None]) / scale[:, None]
         return gram[np.ix_(o, o)] - cross_term.T @ solved
 
-    def projected_power(self, free: Sequence[str], fixed: Sequence[str], theta_fixed: np.ndarray) -> float:
-        """Whitened power of ``X_fixed theta`` after projecting out the free columns: ``theta^T M theta``
-        (:meth:`projected_gram`)."""
-        theta = np.asarray(theta_fixed, dtype=np.float64)
-        return float(theta @ self.projected_gram(free, fixed) @ theta)
-
     # time domain --------------------------------------------------------------------------
     def ctx_of(self, candidate: Candidate, onset_s: float | str | None = "current") -> CandidateContext:
         """The candidate context with the candidate's onset (``"current"``: the one set, if any)."""
