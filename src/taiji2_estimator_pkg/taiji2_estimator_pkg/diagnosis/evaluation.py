@@ -39,7 +39,7 @@ from taiji2_estimator_pkg.diagnosis.channels import CHANNELS
 from taiji2_estimator_pkg.diagnosis.locations import Location, LocationGrid, masked_views
 from taiji2_estimator_pkg.diagnosis.record import Record
 
-__all__ = ["Cell", "accepted_report_data", "excess", "how_far", "signature_cells"]
+__all__ = ["Cell", "accepted_report_data", "excess", "held_out_group", "how_far", "signature_cells"]
 
 Cell = tuple[int, np.ndarray, tuple[float, float], str]
 """(channel index, bin mask, band [Hz], kind)."""
@@ -188,6 +188,27 @@ def held_out_deterministic(train: Record, test: Record, candidate: Candidate, ot
         "heldout_expected_z": math.sqrt(power) if power > 0 else None,
         "heldout_z_sd": math.sqrt(1.0 + training_variance) if power > 0 else None,
     }
+
+
+def held_out_group(train: Record, test: Record, names: Sequence[str], others: Sequence[str]) -> dict[str, float]:
+    """The held-out check of several effects at once (a family stack, :mod:`.standing` rule 3): their
+    magnitudes fitted together on ``train`` and applied, fixed, to ``test`` (``others`` refitted there);
+    ``heldout_z``, ``heldout_expected_z`` and ``heldout_z_sd`` as for one effect (the module's definitions,
+    ``theta`` the stack's vector), and ``heldout_delta_chi2``."""
+    k = len(names)
+    theta_tr, cov_tr, _ = train.fit(list(others) + list(names))
+    theta_e, cov_e = theta_tr[-k:], cov_tr[-k:, -k:]
+    _, _, chi2_before = test.fit(others)
+    _, chi2_fixed = test.fit_with_fixed(others, names, theta_e)
+    gain_fixed = chi2_before - chi2_fixed
+    information = test.projected_gram(others, names)
+    power = float(theta_e @ information @ theta_e)
+    if not power > 0:
+        return {}
+    leverage = information @ theta_e
+    return {"heldout_z": (gain_fixed + power) / (2.0 * math.sqrt(power)), "heldout_expected_z": math.sqrt(power),
+            "heldout_z_sd": math.sqrt(1.0 + float(leverage @ cov_e @ leverage) / power),
+            "heldout_delta_chi2": gain_fixed}
 
 
 def held_out_noise(train: Record, test: Record, others: Sequence[str], band_edges_hz: Sequence[float],

@@ -46,6 +46,10 @@ class EffectReport:
         included (1 where that error is negligible; :mod:`.evaluation`).
     magnitude_train, sigma_train : float or None
         Fit on the training part.
+    family_heldout : dict
+        Family stack (naming rule 3, :mod:`.standing`) -> its held-out check as one (``heldout_z``,
+        ``heldout_expected_z``, ``heldout_z_sd``, ``heldout_delta_chi2``) and its in-sample ``delta_chi2`` and
+        ``n_params``: a member of a standing family is judged by these.
     parameters : dict
         Every parameter (value, sigma).
     aliases : list of str
@@ -81,6 +85,7 @@ class EffectReport:
     heldout_z_sd: float | None = None
     magnitude_train: float | None = None
     sigma_train: float | None = None
+    family_heldout: dict[str, dict[str, float]] = field(default_factory=dict)
     parameters: dict[str, Any] = field(default_factory=dict)
     aliases: list[str] = field(default_factory=list)
     partners: list[str] = field(default_factory=list)
@@ -106,6 +111,8 @@ class EffectReport:
             "heldout_delta_chi2_best": _num(self.heldout_delta_chi2_best), "heldout_z": _num(self.heldout_z),
             "heldout_expected_z": _num(self.heldout_expected_z), "heldout_z_sd": _num(self.heldout_z_sd),
             "magnitude_train": _num(self.magnitude_train), "sigma_train": _num(self.sigma_train),
+            "family_heldout": {group: {key: _num(value) for key, value in data.items()}
+                               for group, data in self.family_heldout.items()},
             "parameters": self.parameters, "aliases": self.aliases, "partners": self.partners, "g_shift": self.g_shift,
             "d_shift": self.d_shift, "cells": self.cells, "injection": self.injection,
             "rejected": self.rejected, "timing": self.name in TIMING_FAMILIES,

@@ -56,6 +56,7 @@ selected for is then part of the unexplained verdict.
 from __future__ import annotations
 
 from collections.abc import Callable, Collection, Sequence
+from dataclasses import replace
 from typing import Any
 
 from scipy.stats import chi2 as chi2_dist
@@ -150,6 +151,17 @@ def _reason(report: Any, unexplained: bool, level: float | None) -> str | None:
     return None
 
 
+def _as_family(report: Any, standing_families: Collection[str]) -> Any:
+    """A member of a standing family as its held-out check and in-sample gain judge it: the family's
+    (``report.family_heldout``, :mod:`.stages.held_out`); the report itself otherwise."""
+    held = getattr(report, "family_heldout", None) or {}
+    for group in (family_group(report.name, report.variant), subfamily_group(report.name, report.variant)):
+        if report.variant and group in standing_families and "heldout_z" in held.get(group, {}):
+            return replace(report, **{key: held[group][key] for key in (
+                "heldout_z", "heldout_expected_z", "heldout_z_sd", "delta_chi2", "n_params") if key in held[group]})
+    return report
+
+
 def standing_verdict(reports: Sequence[Any], unexplained: bool, families: Sequence[str] = (),
                      gap_channels: Collection[str] | None = None, level: float | None = None
                      ) -> tuple[list[Any], dict[str, str]]:
@@ -179,8 +191,8 @@ def standing_verdict(reports: Sequence[Any], unexplained: bool, families: Sequen
     named = []
     rejected: dict[str, str] = {}
     standing_families = set(families)
-    reasons = {report.key: _reason(report, unexplained and _beside_gap(report, gap_channels), level)
-               for report in reports if report.accepted}
+    reasons = {report.key: _reason(_as_family(report, standing_families), unexplained and _beside_gap(
+        report, gap_channels), level) for report in reports if report.accepted}
     # the stacks of rule 3: variants of one physical family (one GRS's effect, family_group) that stand
     # on rules 1 and 2 (a variant the held-out data refuse, or one of the other GRS, is no part of it)
     stacked: dict[str, int] = {}

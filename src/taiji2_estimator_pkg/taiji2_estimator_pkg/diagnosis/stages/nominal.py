@@ -19,6 +19,7 @@ from scipy.stats import chi2 as chi2_dist
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate, candidate_catalog
 from taiji2_estimator_pkg.diagnosis.extended import extend_model
+from taiji2_estimator_pkg.diagnosis.family_candidates import FamilyCandidate, family_candidates
 from taiji2_estimator_pkg.diagnosis.inputs import DiagnosisInput
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress, record_settings
@@ -78,11 +79,13 @@ class Nominal:
     log_n : float
         ``ln N`` of the BIC penalty (N rows of the fit).
     floor : dict of int to float
-        Candidate gain floor per parameter count (Bonferroni over the candidates).
+        Candidate gain floor per parameter count (Bonferroni over the candidates, the families included).
     theta, cov, chi2 : ndarray, ndarray, float
         The nominal fit.
     calibration : dict
         The report's calibration block (nominal model).
+    families : list of FamilyCandidate
+        The variants of one physics of one family, each also a candidate of selection (:mod:`..family_candidates`).
     """
 
     start: Start
@@ -98,11 +101,12 @@ class Nominal:
     cov: np.ndarray
     chi2: float
     calibration: dict[str, Any]
+    families: list[FamilyCandidate]
 
     @property
     def n_candidates(self) -> int:
-        """Candidate variants, the noise candidate included."""
-        return len(self.candidates) + (self.noise is not None)
+        """Candidates of selection: the variants, the families and the noise candidate."""
+        return len(self.candidates) + len(self.families) + (self.noise is not None)
 
 
 def with_stamp_phases(model: NominalModel, inp: DiagnosisInput) -> NominalModel:
@@ -177,8 +181,11 @@ def fit_nominal(inp: DiagnosisInput, start: Start, options: DiagnosisOptions, sa
         d = d + theta_check[6:12].reshape(2, 3)
     nuisance = full.nuisance
     log_n = math.log(full.n_rows)
-    n_candidates = len(candidates) + (noise is not None)
-    floor = {p: float(chi2_dist.isf(options.alpha_candidates / max(n_candidates, 1), p)) for p in (1, 2)}
+    families = family_candidates(candidates)
+    n_candidates = len(candidates) + len(families) + (noise is not None)
+    # a family of the free slots' variants has at most 2 max_effects parameters (a gravity-gradient axis has two)
+    floor = {p: float(chi2_dist.isf(options.alpha_candidates / max(n_candidates, 1), p))
+             for p in range(1, 2 * max(options.max_effects, 1) + 1)}
     theta_n, cov_n, chi2_n = full.fit(nuisance)
     dof = full.n_rows - len(nuisance)
     sig_n = np.sqrt(np.maximum(np.diag(cov_n), 0.0))
@@ -192,4 +199,5 @@ def fit_nominal(inp: DiagnosisInput, start: Start, options: DiagnosisOptions, sa
         "chi2": chi2_n, "dof": dof, "chi2_z": (chi2_n - dof) / math.sqrt(2.0 * dof),
         "f_max_hz": options.f_max_hz,
     }
-    return Nominal(start, g, d, full, candidates, noise, nuisance, log_n, floor, theta_n, cov_n, chi2_n, calibration)
+    return Nominal(start, g, d, full, candidates, noise, nuisance, log_n, floor, theta_n, cov_n, chi2_n, calibration,
+                   families)

@@ -2,8 +2,10 @@
 
 Every variant not yet accepted is added to the calibrated model and refitted jointly with G, d and
 the nuisance terms; its likelihood gain is ``delta chi^2`` (``2 delta log L`` for the noise
-candidate), its score ``delta chi^2 - p ln N`` (BIC). The best variant is accepted while its score
-is positive and its gain passes a Bonferroni floor over the candidates; at most
+candidate), its score ``delta chi^2 - p ln N`` (BIC). The variants of one physics of one family not yet
+accepted (at least two) are also scored as one candidate (:mod:`..family_candidates`); taken, all are
+accepted. The best variant is accepted while its score is positive and its gain passes a Bonferroni floor
+over the candidates; at most
 ``options.max_effects`` physical effects (timing effects, each timing family at most once, do not
 count). Of the two delay families (an actuation delay, a GRS stamp offset) one at most is accepted
 from the start. A thruster lag beside an accepted delay (or a delay beside an accepted lag) is scored by
@@ -21,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from taiji2_estimator_pkg.diagnosis.candidates import TIMING_FAMILIES, Candidate, NoiseCandidate
+from taiji2_estimator_pkg.diagnosis.family_candidates import FamilyCandidate
 from taiji2_estimator_pkg.diagnosis.joint_timing import (
     DELAY_FAMILIES,
     JointTiming,
@@ -31,6 +34,7 @@ from taiji2_estimator_pkg.diagnosis.joint_timing import (
 )
 from taiji2_estimator_pkg.diagnosis.onset import onset_posterior
 from taiji2_estimator_pkg.diagnosis.options import DiagnosisOptions, Progress
+from taiji2_estimator_pkg.diagnosis.record import Record
 from taiji2_estimator_pkg.diagnosis.stages.late_start import late_start
 from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
 
@@ -66,6 +70,20 @@ def _physical_count(accepted: list[Candidate | NoiseCandidate]) -> int:
     return sum(not (isinstance(c, Candidate) and c.is_timing) for c in accepted)
 
 
+def _onset(full: Record, candidate: Candidate, others: list[str], options: DiagnosisOptions, log_n: float,
+           say: Progress) -> dict[str, Any]:
+    """The accepted candidate's onset (profile likelihood, :mod:`..onset`), set in ``full`` (and the candidate
+    relinearised there) where the GLR passes ``options.onset_penalty ln N``."""
+    info = onset_posterior(full, candidate, others)
+    info["modelled"] = bool(info["delta_chi2"] > options.onset_penalty * log_n)
+    if info["modelled"]:
+        full.set_onset(candidate, info["value"])
+        full.refine(candidate, others)
+        say(f"  {candidate.key} starts at {info['value']:.0f} +- {info['sigma']:.0f} s "
+            f"({info['kind']}; GLR delta chi2 {info['delta_chi2']:.1f})")
+    return info
+
+
 def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -> Selection:
     """Forward selection; relinearises, sets onsets and the noise model in ``nominal.full``."""
     full, candidates, noise, log_n, floor = (nominal.full, nominal.candidates, nominal.noise, nominal.log_n,
@@ -80,7 +98,7 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
     joint_fits: dict[str, JointTiming] = {}  # per candidate: its pair's joint fit
     late_columns: dict = {}  # the late-start look's column DFTs, built once per selection (.late_start)
     for step in range(options.max_effects + len(TIMING_FAMILIES)):
-        evaluations: list[tuple[float, float, Candidate | NoiseCandidate]] = []
+        evaluations: list[tuple[float, float, Candidate | FamilyCandidate | NoiseCandidate]] = []
         joints: dict[str, JointTiming] = {}
         physical_full = _physical_count(accepted) >= options.max_effects
         # a delay accepted from the start: the other delay family would add to it only the star tracker's
@@ -108,6 +126,12 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
                 chi2_new = full.chi2(current + candidate.column_names())
             gain = chi2_current - chi2_new
             evaluations.append((gain - candidate.n_params * log_n, gain, candidate))
+        free_slots = options.max_effects - _physical_count(accepted)
+        for family in nominal.families:  # one physics of one family as one candidate (..family_candidates)
+            group = family.remaining(accepted)
+            if group is not None and len(group.members) <= free_slots:
+                gain = chi2_current - full.chi2(current + group.column_names())
+                evaluations.append((gain - group.n_params * log_n, gain, group))
         noise_step = None
         if noise is not None and noise not in accepted and not physical_full:
             theta_cur, _, _ = full.fit(current)
@@ -132,7 +156,8 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
             steps.append({"step": step + 1, "accepted": None, "top": top})
             break
         score, gain, best = passing[0]
-        accepted.append(best)
+        if not isinstance(best, FamilyCandidate):  # a family adds its members (below)
+            accepted.append(best)
         steps.append({"step": step + 1, "accepted": best.key, "delta_chi2": round(gain, 2), "score": round(score, 2),
                       "top": top})
         if late is not None:
@@ -143,19 +168,24 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
         if isinstance(best, NoiseCandidate) and noise_step is not None:
             noise_fit = {"kappa": noise_step[0], "gain": noise_step[1], "sigma": noise_step[2]}
             full.rebuild(noise_step[0])
+        elif isinstance(best, FamilyCandidate):  # every member accepted; each relinearised and its onset profiled
+            accepted.extend(best.members)        # beside the others
+            steps[-1]["variants"] = [member.key for member in best.members]
+            group_columns = best.column_names()
+            for member in best.members:
+                full.refine(member, current + [n for n in group_columns if n not in member.column_names()])
+            if options.onsets:
+                for member in best.members:
+                    others = current + [n for n in group_columns if n not in member.column_names()]
+                    onsets[member.key] = _onset(full, member, others, options, log_n, say)
+            current = current + group_columns
         elif isinstance(best, Candidate):
             if best.key in joints:  # both columns become exact secants at the jointly fitted pair
                 apply_joint_timing(full, joints[best.key])
             else:  # second-order signatures: relinearise at the fitted magnitude
                 full.refine(best, current)
             if options.onsets:  # does it start mid-run? (profile likelihood over its onset, .onset)
-                info = onset_posterior(full, best, current)
-                info["modelled"] = bool(info["delta_chi2"] > options.onset_penalty * log_n)
-                if info["modelled"]:
-                    full.set_onset(best, info["value"])
-                    full.refine(best, current)
-                    say(f"  {best.key} starts at {info['value']:.0f} +- {info['sigma']:.0f} s "
-                        f"({info['kind']}; GLR delta chi2 {info['delta_chi2']:.1f})")
+                info = _onset(full, best, current, options, log_n, say)
                 onsets[best.key] = info
                 steps[-1]["onset_s"] = {"value": info["value"], "sigma": info["sigma"], "modelled": info["modelled"]}
             current = current + best.column_names()
