@@ -397,35 +397,46 @@ class Record:
         """chi2 and ``log det`` of the candidate's parameter covariance for each trial onset, ``others``
         refitted (the profile likelihood over the onset; :func:`.onset.onset_posterior`). ``fixed``: the
         others' normal equations already factored (``design.conditioned``); ``columns``: (variant key, onset)
-        -> column DFTs kept across calls by a caller whose variant's signature does not change meanwhile."""
+        -> column DFTs kept across calls by a caller whose variant's signature does not change meanwhile.
+        A family of variants (``candidate.members``, :mod:`.family_candidates`) is profiled over one onset
+        of all its members."""
+        members = getattr(candidate, "members", (candidate,))
         chi2 = np.empty(len(onsets_s))
         log_det = np.empty(len(onsets_s))
-        # a relinearised series signature from its weighted terms (.step_onset)
-        value = self.secant.get(candidate.key)
-        weights = None if candidate.series is None or value is None else self._secant_weights(candidate, value)
-        plain = candidate.key not in self.exact_secants
-        pieces: StepPieces | bool | None = None if plain else False  # built at the first onset not kept
+        pieces: dict[str, StepPieces | bool | None] = {}
         if fixed is None:
             fixed = self.design.conditioned(self.indices(others))  # the others' normal equations, factored once
         for i, onset in enumerate(onsets_s):
-            key = (candidate.key, float(onset))
-            ffts = None if columns is None else columns.get(key)
-            if ffts is None:
-                if pieces is None:  # one build for every onset of the call (.step_onset)
-                    pieces = step_pieces(candidate, self.ctx, weights) or False
-                if pieces:
-                    ffts = pieces.ffts_at(float(onset), self.k_max)
-                else:
-                    ffts = self.column_ffts(candidate, float(onset))
-                if columns is not None:
-                    columns[key] = ffts
+            ffts = [fft for member in members for fft in self._onset_ffts(member, float(onset), pieces, columns)]
             _, cov, chi2[i] = fixed.add(self.whitener, ffts)
             # the parameters present from the start only: a step-only one (Candidate.step_params) is profiled,
             # its flat-prior integral diverging as the onset nears the start, where its column vanishes
-            q = candidate.n_params
+            q = sum(member.n_params for member in members)
             sign, value = np.linalg.slogdet(cov[:q, :q])
             log_det[i] = value if sign > 0 else -np.inf
         return chi2, log_det
+
+    def _onset_ffts(self, candidate: Candidate, onset_s: float, pieces: dict[str, StepPieces | bool | None],
+                    columns: dict[tuple[str, float], list[np.ndarray]] | None) -> list[np.ndarray]:
+        """The candidate's column DFTs from ``onset_s`` on (:meth:`onset_profile`); ``pieces``: its step pieces
+        (.step_onset) by key, built at the first onset not kept in ``columns``."""
+        key = (candidate.key, onset_s)
+        ffts = None if columns is None else columns.get(key)
+        if ffts is not None:
+            return ffts
+        if candidate.key not in pieces:
+            if candidate.key in self.exact_secants:
+                pieces[candidate.key] = False
+            else:  # a relinearised series signature from its weighted terms (.step_onset)
+                value = self.secant.get(candidate.key)
+                weights = None if candidate.series is None or value is None else self._secant_weights(candidate,
+                                                                                                      value)
+                pieces[candidate.key] = step_pieces(candidate, self.ctx, weights) or False
+        built = pieces[candidate.key]
+        ffts = built.ffts_at(onset_s, self.k_max) if built else self.column_ffts(candidate, onset_s)
+        if columns is not None:
+            columns[key] = ffts
+        return ffts
 
     def time_column(self, name: str) -> np.ndarray:
         """(n, 15) column by name (recomputed)."""

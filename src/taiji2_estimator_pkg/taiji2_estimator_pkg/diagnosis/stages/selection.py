@@ -70,15 +70,24 @@ def _physical_count(accepted: list[Candidate | NoiseCandidate]) -> int:
     return sum(not (isinstance(c, Candidate) and c.is_timing) for c in accepted)
 
 
-def _onset(full: Record, candidate: Candidate, others: list[str], options: DiagnosisOptions, log_n: float,
-           say: Progress) -> dict[str, Any]:
-    """The accepted candidate's onset (profile likelihood, :mod:`..onset`), set in ``full`` (and the candidate
-    relinearised there) where the GLR passes ``options.onset_penalty ln N``."""
+def _beside(family: FamilyCandidate, member: Candidate) -> list[str]:
+    """The columns of a family's other members."""
+    return [name for other in family.members if other is not member for name in other.column_names()]
+
+
+def _onset(full: Record, candidate: Candidate | FamilyCandidate, others: list[str], options: DiagnosisOptions,
+           log_n: float, say: Progress) -> dict[str, Any]:
+    """The accepted candidate's onset (profile likelihood, :mod:`..onset`; a family's, of all its members at
+    once), set in ``full`` (and relinearised there) where the GLR passes ``options.onset_penalty ln N``."""
     info = onset_posterior(full, candidate, others)
     info["modelled"] = bool(info["delta_chi2"] > options.onset_penalty * log_n)
     if info["modelled"]:
-        full.set_onset(candidate, info["value"])
-        full.refine(candidate, others)
+        members = candidate.members if isinstance(candidate, FamilyCandidate) else (candidate,)
+        for member in members:
+            full.set_onset(member, info["value"])
+        for member in members:
+            full.refine(member, others + (_beside(candidate, member) if isinstance(candidate, FamilyCandidate)
+                                          else []))
         say(f"  {candidate.key} starts at {info['value']:.0f} +- {info['sigma']:.0f} s "
             f"({info['kind']}; GLR delta chi2 {info['delta_chi2']:.1f})")
     return info
@@ -171,14 +180,13 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
         elif isinstance(best, FamilyCandidate):  # every member accepted; each relinearised and its onset profiled
             accepted.extend(best.members)        # beside the others
             steps[-1]["variants"] = [member.key for member in best.members]
-            group_columns = best.column_names()
             for member in best.members:
-                full.refine(member, current + [n for n in group_columns if n not in member.column_names()])
-            if options.onsets:
-                for member in best.members:
-                    others = current + [n for n in group_columns if n not in member.column_names()]
-                    onsets[member.key] = _onset(full, member, others, options, log_n, say)
-            current = current + group_columns
+                full.refine(member, current + _beside(best, member))
+            if options.onsets:  # one onset of the whole family
+                info = _onset(full, best, current, options, log_n, say)
+                onsets.update({member.key: info for member in best.members})
+                steps[-1]["onset_s"] = {"value": info["value"], "sigma": info["sigma"], "modelled": info["modelled"]}
+            current = current + best.column_names()
         elif isinstance(best, Candidate):
             if best.key in joints:  # both columns become exact secants at the jointly fitted pair
                 apply_joint_timing(full, joints[best.key])
