@@ -14,8 +14,9 @@ together, with their whole parameter count in the BIC penalty and the Bonferroni
 as candidates in that floor. A group taken is profiled over one onset of all its members (a family's effect
 starts at once): member by member, a misalignment about y of a full cross-talk of GRS2 from 2,600 s (blind seed
 17, set 80) had no onset of its own beside the others' (GLR 1.0), stayed from the start, explained 31 % of its
-gap and was refused, leaving that gap "unexplained". A single effect is never taken as its group: the other
-variants add noise (chi-square of their count) and cost ``ln N`` each.
+gap and was refused, leaving that gap "unexplained". A single effect is taken as its group only where the
+other variants gain more than ``ln N`` each beside it: with no effect of theirs they add noise alone (a
+chi-square of their count).
 """
 
 from __future__ import annotations

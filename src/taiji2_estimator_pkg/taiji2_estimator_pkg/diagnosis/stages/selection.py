@@ -177,8 +177,8 @@ def select_effects(nominal: Nominal, options: DiagnosisOptions, say: Progress) -
         if isinstance(best, NoiseCandidate) and noise_step is not None:
             noise_fit = {"kappa": noise_step[0], "gain": noise_step[1], "sigma": noise_step[2]}
             full.rebuild(noise_step[0])
-        elif isinstance(best, FamilyCandidate):  # every member accepted; each relinearised and its onset profiled
-            accepted.extend(best.members)        # beside the others
+        elif isinstance(best, FamilyCandidate):  # every member accepted, each relinearised beside the others
+            accepted.extend(best.members)
             steps[-1]["variants"] = [member.key for member in best.members]
             for member in best.members:
                 full.refine(member, current + _beside(best, member))
