@@ -68,10 +68,11 @@ def check_held_out(inp: DiagnosisInput, nominal: Nominal, selection: Selection, 
         names = [name for member in members for name in member.column_names()]
         others = list(full.nuisance) + [name for c in accepted if isinstance(c, Candidate) and c.key not in keys
                                         for name in c.column_names()]
+        gain = {"delta_chi2": full.chi2(others) - full.chi2(others + names),
+                "n_params": sum(member.n_params for member in members)}
         for report in reports:
             if group in report.family_heldout:
-                report.family_heldout[group].update({"delta_chi2": full.chi2(others) - full.chi2(others + names),
-                                                     "n_params": sum(member.n_params for member in members)})
+                report.family_heldout[group].update(gain)
     return reports
 
 
