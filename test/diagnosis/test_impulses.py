@@ -62,6 +62,37 @@ def test_an_snr_8_impulse_is_found_at_its_sample(model):
     assert found >= 45, found
 
 
+def test_an_impulse_a_chain_spreads_over_two_samples_is_timed_and_sized_between_them(model):
+    """A smoothing chain (the reference fidelity's anti-alias filter) spreads a kick between two samples over
+    both; here 40 % on sample k and 60 % on k + 1, i.e. 0.6 samples after the middle of k's step. Over 30 seeded
+    records at SNR 12 (SNR 7.2 for the one-sample template of the detection: ~3 % missed): the time within 0.3
+    sample of the truth (the estimate's spread at this SNR is 0.09 sample, measured on 60 records) and the
+    largest of the three sizes' errors within 3 sigma (0.99 if unbiased), each in at least 25. The one-sample
+    template sized such a kick at ~0.7 and timed it at the middle of a step, 0.4 or 0.6 sample off."""
+    rng = np.random.default_rng(12)
+    keep = np.ones(N, dtype=bool)
+    t_s = 0.1 * np.arange(1, N + 1)
+    timed = sized = 0
+    inertia_inv = np.linalg.inv(model.inertia_kg_m2)
+    for _ in range(30):
+        residual = _white(rng)
+        k = int(rng.integers(100, N - 100))
+        direction = rng.standard_normal(3)
+        kick = 12.0 * SIGMA_TORQUE * direction / np.linalg.norm(direction)
+        residual[k, 3:6] += 0.4 * kick
+        residual[k + 1, 3:6] += 0.6 * kick
+        events = [e for e in detect_impulses(residual, None, model, t_s, keep).events if abs(e.time_s - t_s[k]) < 0.2]
+        if not events:
+            continue
+        event = events[0]
+        timed += abs(event.time_s - (t_s[k] - 0.05 + 0.06)) < 0.03
+        measured = inertia_inv @ event.angular_momentum_n_m_s / 0.1
+        sigma = np.sqrt(np.diag(inertia_inv @ event.angular_momentum_cov @ inertia_inv.T)) / 0.1
+        sized += bool(np.all(np.abs(measured - kick) < 3.0 * sigma))
+    assert timed >= 25, timed
+    assert sized >= 25, sized
+
+
 def test_a_mean_or_slow_residual_is_no_impulse_and_an_impulse_on_it_keeps_its_size(model):
     """A mean torque (the fit drops the DC bin: a gravity gradient's constant part stays in the residual) of
     (1.2, -1.4, 0.8) sigma makes the statistic non-central (lambda 4: about 7 samples of a 20,000-sample record

@@ -38,11 +38,13 @@ torque noise and GRS angular readout noise, both white at 10 Hz) above the lowes
   too, except near a step seen fewer than 8 times; not searched: the record's ends that the torque
   channel leaves out, epochs the input estimated (bridged gaps).
 
-Each event is then fitted in six degrees of freedom at its sample: the angular momentum
-``L = J A dt`` and, from the common linear channel (prewhitened by ``1 - phi z``: an impulse is the
-doublet ``(1, -phi)`` there), the linear impulse ``p = M dt (l_k - phi l_{k+1}) / (1 + phi^2)``,
-each with its covariance; its time is the middle of the sample's integration step (1-sigma
-``dt / sqrt(12)``). The fitted events become columns of the final model (:func:`impulse_candidate`),
+Each event is then fitted in six degrees of freedom about its sample, at its time within the samples
+(:func:`_sub_sample_fit`: a chain that smooths spreads a kick between two samples over both): the angular
+momentum ``L = J A dt`` and, from the common linear channel (prewhitened by ``1 - phi z``: an impulse is the
+doublet ``(1, -phi)`` there), the linear impulse (``p = M dt (l_k - phi l_{k+1}) / (1 + phi^2)`` for a kick
+read as one sample), each with its covariance; its time is ``t_k - dt/2 + s dt`` for the fitted time ``s``
+[samples] (1-sigma stated as ``dt / sqrt(12)``, the integrating readout's, where the time within a step is
+unobservable). The fitted events become columns of the final model (:func:`impulse_candidate`),
 so that the calibration and the residual scan are free of them.
 """
 
@@ -63,7 +65,7 @@ from taiji2_estimator_pkg.diagnosis.edge_pattern import remove_edge_pattern
 from taiji2_estimator_pkg.diagnosis.model import NominalModel
 
 __all__ = ["BASELINE_HALF_WINDOW_S", "EDGE_GUARD_S", "FALSE_ALARM_PER_RECORD", "MAX_IMPULSES", "Impulse",
-           "detect_impulses", "impulse_candidate", "local_baseline", "search_input"]
+           "detect_impulses", "impulse_candidate", "local_baseline", "search_input", "shifted_template"]
 
 FALSE_ALARM_PER_RECORD = 0.01
 """alpha: probability of one or more reported impulses in a record of pure noise (Bonferroni over samples)."""
@@ -83,6 +85,13 @@ the search stops, reports and fits none, and says so (``Impulses.abandoned``).""
 _TORQUE = slice(CHANNELS.index("torque_x"), CHANNELS.index("torque_x") + 3)
 _LIN_COMMON = slice(CHANNELS.index("lin_common_x"), CHANNELS.index("lin_common_x") + 3)
 _KERNEL_HALF = 4  # template taps either side of the impulse's sample
+SUB_SAMPLE_SHIFTS = np.linspace(-1.0, 1.0, 41)
+"""Times [samples, from the middle of the detected sample's step] tried for an impulse (:func:`_sub_sample_fit`)."""
+
+SHIFT_GAIN_MIN = float(chi2.isf(0.01, 1))
+"""A time off the detected sample's middle is taken only where it raises the statistic ``T`` by more than this
+(6.6): an integrating readout leaves an impulse's time within its step unobservable, and noise alone then moves
+the best time off the middle by this much in 1 % of impulses."""
 _ROBUST_SIGMAS = 5.0
 
 
@@ -252,16 +261,75 @@ def detect_impulses(residual: np.ndarray, response: ResponseFit | None, model: N
         if len(events) == MAX_IMPULSES:  # not a few impulses: none of them is reported or fitted
             return Impulses([], math.sqrt(threshold), searched, abandoned=True, exceedances=len(events) + 1)
         open_[max(0, k - 2 * _KERNEL_HALF):k + 2 * _KERNEL_HALF + 1] = False
-        after = linear[k + 1] if k + 1 < linear.shape[0] else np.zeros(3)
-        dv = dt * (linear[k] - phi * after) / (1.0 + phi * phi)
+        fit = _sub_sample_fit(torque, k, kernel, cov_a)
+        # the linear impulse: the same template (the axes' mean) through the common channel's prewhitening 1 - phi z
+        shape = np.mean(fit.template, axis=0)
+        doublet = np.append(shape, 0.0) - phi * np.append(0.0, shape)
+        rows = np.arange(k - _KERNEL_HALF - 1, k + _KERNEL_HALF + 3)
+        inside = (rows >= 0) & (rows < linear.shape[0])
+        weight = float(doublet @ doublet)
+        dv = dt * (doublet[inside] @ linear[rows[inside]]) / weight
         events.append(Impulse(
-            index=k, time_s=float(t_s[k] - 0.5 * dt), time_sigma_s=dt / math.sqrt(12.0),
-            snr=float(math.sqrt(statistic[k])),
-            angular_momentum_n_m_s=model.inertia_kg_m2 @ amplitude[k] * dt,
-            angular_momentum_cov=model.inertia_kg_m2 @ cov_a @ model.inertia_kg_m2.T * dt * dt,
+            index=k + math.floor(fit.shift + 0.5), time_s=float(t_s[k] - 0.5 * dt + fit.shift * dt),
+            time_sigma_s=dt / math.sqrt(12.0), snr=float(math.sqrt(statistic[k])),
+            angular_momentum_n_m_s=model.inertia_kg_m2 @ fit.amplitude * dt,
+            angular_momentum_cov=model.inertia_kg_m2 @ fit.cov @ model.inertia_kg_m2.T * dt * dt,
             linear_impulse_n_s=model.mass_kg * dv,
-            linear_impulse_cov=cov_l * (model.mass_kg * dt) ** 2 / (1.0 + phi * phi)))
+            linear_impulse_cov=cov_l * (model.mass_kg * dt) ** 2 / weight))
     return Impulses(events, math.sqrt(threshold), searched)
+
+
+@dataclass(frozen=True)
+class _SubSampleFit:
+    shift: float
+    template: np.ndarray
+    amplitude: np.ndarray
+    cov: np.ndarray
+
+
+def shifted_template(kernel: np.ndarray, shift: float) -> np.ndarray:
+    """(3, 2 h + 3) template, taps -h-1..h+1, of an impulse ``shift`` samples (|shift| <= 1) from the middle of its
+    sample's step: the chain's kernel there and at the neighbouring sample, in the proportions ``1 - |shift|`` and
+    ``|shift|`` (each sample's step holds the part of a chain's smooth response nearest it)."""
+    template = np.zeros((kernel.shape[0], kernel.shape[1] + 2))
+    template[:, 1:-1] = (1.0 - abs(shift)) * kernel
+    if shift > 0.0:
+        template[:, 2:] += shift * kernel
+    elif shift < 0.0:
+        template[:, :-2] += -shift * kernel
+    return template
+
+
+def _sub_sample_fit(torque: np.ndarray, k: int, kernel: np.ndarray, cov_a: np.ndarray) -> _SubSampleFit:
+    """The impulse about sample ``k``: the time (among :data:`SUB_SAMPLE_SHIFTS`) whose template
+    (:func:`shifted_template`) gives the largest statistic ``T = A^T cov^-1 A``, its amplitudes A (3,) and their
+    covariance (``cov_a`` of the sample's own template, scaled per axis by the templates' energies: white noise).
+
+    An integrating readout reads an impulse anywhere in a sample's step as that one sample; a chain that smooths
+    (an anti-alias filter before decimation) spreads it over the two samples about it in the proportions of its
+    time between them, and the one-sample template read a kick between two samples at 0.66-0.88 of its size
+    (blind seed 17, set 76, reference fidelity: -8.2 and -13.6 of a -25.6 kick on two samples). The sample's own
+    template (shift 0) is kept unless another time beats it by :data:`SHIFT_GAIN_MIN`."""
+    n, span = torque.shape[0], _KERNEL_HALF + 1
+    first, last = max(0, k - span), min(n, k + span + 1)
+    taps = slice(first - (k - span), last - (k - span))
+    energy_own = np.sum(kernel ** 2, axis=1)
+
+    def fit(shift: float) -> tuple[float, _SubSampleFit]:
+        template = shifted_template(kernel, shift)
+        energy = np.sum(template ** 2, axis=1)
+        amplitude = np.einsum("aj,ja->a", template[:, taps], torque[first:last]) / energy
+        scale = np.sqrt(energy_own / energy)
+        cov = cov_a * np.outer(scale, scale)
+        return float(amplitude @ np.linalg.solve(cov, amplitude)), _SubSampleFit(shift, template, amplitude, cov)
+
+    own_statistic, best = fit(0.0)
+    threshold = own_statistic + SHIFT_GAIN_MIN
+    for shift in SUB_SAMPLE_SHIFTS:
+        value, candidate = fit(float(shift))
+        if value > threshold:
+            threshold, best = value, candidate
+    return best
 
 
 def impulse_candidate(event: Impulse, model: NominalModel) -> Candidate:
