@@ -22,7 +22,7 @@ import numpy as np
 
 from taiji2_estimator_pkg.diagnosis.candidates import Candidate, NoiseCandidate
 from taiji2_estimator_pkg.diagnosis.record import Record
-from taiji2_estimator_pkg.diagnosis.standing import FAMILY_VARIANTS_MAX, family_group, family_stacks, subfamily_group
+from taiji2_estimator_pkg.diagnosis.standing import family_group, rule3_stacks
 
 __all__ = ["complete_families"]
 
@@ -52,28 +52,26 @@ def complete_families(full: Record, candidates: Sequence[Candidate], accepted: S
     completed: dict[str, list[str]] = {}
     columns = list(current)
     chi2_current = full.chi2(columns)
-    for grouping in (family_group, subfamily_group):  # the whole family, then its parts of one physics
-        for group, members in family_stacks(accepted, grouping).items():
-            if len(members) <= FAMILY_VARIANTS_MAX or any(
-                    family_group(members[0].name, members[0].variant) == done for done in completed):
-                continue
-            missing = [c for c in candidates if grouping(c.name, c.variant) == group and c not in members]
-            if not missing:
-                continue
-            onsets = [full.onsets.get(c.key) for c in members]
-            # each member's onset is profiled on its own (1,793-1,821 s for one cross-talk from 1,800 s)
-            onset = float(np.median(onsets)) if None not in onsets else None
-            previous = {c.key: full.onsets.get(c.key) for c in missing}
+    for grouping, group, members in rule3_stacks(accepted):  # the whole family, then its parts of one physics
+        if any(family_group(members[0].name, members[0].variant) == done for done in completed):
+            continue
+        missing = [c for c in candidates if grouping(c.name, c.variant) == group and c not in members]
+        if not missing:
+            continue
+        onsets = [full.onsets.get(c.key) for c in members]
+        # each member's onset is profiled on its own (1,793-1,821 s for one cross-talk from 1,800 s)
+        onset = float(np.median(onsets)) if None not in onsets else None
+        previous = {c.key: full.onsets.get(c.key) for c in missing}
+        for candidate in missing:
+            full.set_onset(candidate, onset)
+        extra = [name for c in missing for name in c.column_names()]
+        chi2_completed = full.chi2(columns + extra)
+        penalty = sum(c.n_params_at(onset) for c in missing) * log_n
+        if chi2_current - chi2_completed > penalty:
+            completed[group] = [c.key for c in missing]
+            columns += extra
+            chi2_current = chi2_completed
+        else:
             for candidate in missing:
-                full.set_onset(candidate, onset)
-            extra = [name for c in missing for name in c.column_names()]
-            chi2_completed = full.chi2(columns + extra)
-            penalty = sum(c.n_params_at(onset) for c in missing) * log_n
-            if chi2_current - chi2_completed > penalty:
-                completed[group] = [c.key for c in missing]
-                columns += extra
-                chi2_current = chi2_completed
-            else:
-                for candidate in missing:
-                    full.set_onset(candidate, previous[candidate.key])
+                full.set_onset(candidate, previous[candidate.key])
     return completed

@@ -5,7 +5,8 @@ candidate describes, the best-scoring variants are those that shave a little off
 naming them would be a confident wrong name. So an accepted effect is named only if
 
 1. it explains the gap where its signature lies: ``shrink >= SHRINK_MIN`` (its gain against the
-   excess power remaining at its own cells, :mod:`.evaluation`), and
+   excess power remaining at its own cells where that remainder is significant against its noise,
+   :func:`.evaluation.shrink_fraction`), and
 2. the held-out part confirms it: ``heldout_z >= HELDOUT_Z_MIN`` (its trained magnitude applied,
    fixed, to the held-out third gains against "no effect" by that many sigma), raised to
    ``HELDOUT_Z_MIN_UNEXPLAINED`` when a gap stays unexplained in a channel of the effect's own
@@ -62,10 +63,22 @@ from typing import Any
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 
-__all__ = ["FAMILY_VARIANTS_MAX", "HELDOUT_CONTRADICTION", "HELDOUT_NULL_PASS", "HELDOUT_POWER_MARGIN",
-           "HELDOUT_Z_MIN", "HELDOUT_Z_MIN_UNEXPLAINED", "SHRINK_MIN", "family_group", "family_stacks",
-           "is_fluctuation",
-           "standing_verdict", "subfamily_group", "unconfirmed_floor"]
+__all__ = [
+    "FAMILY_VARIANTS_MAX",
+    "HELDOUT_CONTRADICTION",
+    "HELDOUT_NULL_PASS",
+    "HELDOUT_POWER_MARGIN",
+    "HELDOUT_Z_MIN",
+    "HELDOUT_Z_MIN_UNEXPLAINED",
+    "SHRINK_MIN",
+    "family_group",
+    "family_stacks",
+    "is_fluctuation",
+    "rule3_stacks",
+    "standing_verdict",
+    "subfamily_group",
+    "unconfirmed_floor",
+]
 
 SHRINK_MIN = 0.5
 HELDOUT_Z_MIN = 1.0
@@ -105,6 +118,14 @@ def family_stacks(accepted: Sequence[Any], grouping: Callable[[str, str], str]) 
         if getattr(candidate, "variant", "") and not getattr(candidate, "is_timing", True):
             groups.setdefault(grouping(candidate.name, candidate.variant), []).append(candidate)
     return groups
+
+
+def rule3_stacks(accepted: Sequence[Any]) -> list[tuple[Callable[[str, str], str], str, list[Any]]]:
+    """The stacks of naming rule 3: more than :data:`FAMILY_VARIANTS_MAX` accepted variants of one family
+    (:func:`family_group`), then of one physics of it (:func:`subfamily_group`), as ``(grouping, group,
+    members)`` in that order."""
+    return [(grouping, group, members) for grouping in (family_group, subfamily_group)
+            for group, members in family_stacks(accepted, grouping).items() if len(members) > FAMILY_VARIANTS_MAX]
 
 
 def subfamily_group(name: str, variant: str) -> str:

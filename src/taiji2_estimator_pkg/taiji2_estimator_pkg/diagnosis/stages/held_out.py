@@ -42,7 +42,7 @@ from taiji2_estimator_pkg.diagnosis.record import Record, RecordSettings
 from taiji2_estimator_pkg.diagnosis.results import EffectReport
 from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
 from taiji2_estimator_pkg.diagnosis.stages.selection import Selection
-from taiji2_estimator_pkg.diagnosis.standing import FAMILY_VARIANTS_MAX, family_group, family_stacks, subfamily_group
+from taiji2_estimator_pkg.diagnosis.standing import rule3_stacks
 
 __all__ = ["check_held_out", "held_out_splits"]
 
@@ -79,8 +79,7 @@ def check_held_out(inp: DiagnosisInput, nominal: Nominal, selection: Selection, 
 def _stacks(accepted: Sequence[Candidate | NoiseCandidate]) -> dict[str, list[Candidate]]:
     """The stacks of naming rule 3: more than ``FAMILY_VARIANTS_MAX`` accepted variants of one family or of one
     physics of it (:func:`..standing.family_group`, :func:`..standing.subfamily_group`)."""
-    return {group: members for grouping in (family_group, subfamily_group)
-            for group, members in family_stacks(accepted, grouping).items() if len(members) > FAMILY_VARIANTS_MAX}
+    return {group: members for _, group, members in rule3_stacks(accepted)}
 
 
 def held_out_splits(n: int, onsets: Sequence[int], train_fraction: float, period: int) -> tuple[int, int]:

@@ -25,11 +25,10 @@ from taiji2_estimator_pkg.diagnosis.stages.final_scan import FinalModel, describ
 from taiji2_estimator_pkg.diagnosis.stages.nominal import Nominal
 from taiji2_estimator_pkg.diagnosis.stages.selection import Selection
 from taiji2_estimator_pkg.diagnosis.standing import (
-    FAMILY_VARIANTS_MAX,
     SHRINK_MIN,
     family_group,
-    family_stacks,
     is_fluctuation,
+    rule3_stacks,
     standing_verdict,
     subfamily_group,
 )
@@ -84,15 +83,14 @@ def _families(full: Record, candidates: Sequence[Candidate], accepted: Sequence[
     it lacks gain more than ``(p - k) ln N`` in the final model; it is then named once, with its
     vector of magnitudes and their covariance (the fit with every variant of the family).
     """
-    out = []
-    for grouping in (family_group, subfamily_group):  # the whole family, then its parts of one physics
+    out: list[dict[str, Any]] = []
+    for grouping, group, members in rule3_stacks(accepted):  # the whole family, then its parts of one physics
+        if group in {f["family"] for f in out}:
+            continue
         standing = {f["family"] for f in out if f["stands"]}
-        for group, members in family_stacks(accepted, grouping).items():
-            if len(members) <= FAMILY_VARIANTS_MAX or group in {f["family"] for f in out}:
-                continue
-            if grouping is subfamily_group and family_group(members[0].name, members[0].variant) in standing:
-                continue
-            out.append(_family_fit(full, candidates, grouping, group, members, current, chi2_final, log_n))
+        if grouping is subfamily_group and family_group(members[0].name, members[0].variant) in standing:
+            continue
+        out.append(_family_fit(full, candidates, grouping, group, members, current, chi2_final, log_n))
     return out
 
 
