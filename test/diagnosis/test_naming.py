@@ -21,9 +21,9 @@ CELL = {"channel": "lin_diff_z", "band_hz": [0.1, 0.3], "kind": "continuum", "bi
 
 
 def _report(variant: str, score: float, shrink: float, name: str = "readout_nonlinearity",
-            expected_z: float | None = None) -> EffectReport:
+            expected_z: float | None = None, heldout_z: float = 3.0) -> EffectReport:
     return EffectReport(name=name, variant=variant, magnitude=1e7, sigma=1e6, unit="1/(m s^-2)", score=score,
-                        delta_chi2=score + 11.0, n_params=1, accepted=True, shrink=shrink, heldout_z=3.0,
+                        delta_chi2=score + 11.0, n_params=1, accepted=True, shrink=shrink, heldout_z=heldout_z,
                         heldout_expected_z=expected_z, cells=[CELL])
 
 
@@ -59,12 +59,12 @@ def test_an_effect_below_the_naming_level_is_a_fluctuation_not_a_gap():
     and leaves no unexplained gap beside the named effect (blind seed 16, set 14); alone, the record reads "no
     significant gap"."""
     named = _report("z", 500.0, 1.0, name="inertia_error")
-    drift = _report("grs2.y", 15.2 - 11.0, 1.0, name="scale_factor_drift", expected_z=1.2)
+    drift = _report("grs2.y", 15.2 - 11.0, 1.0, name="scale_factor_drift", expected_z=1.2, heldout_z=2.0)
     verdict = _verdict(["inertia_error", "scale_factor_drift"])
     _apply_naming_rule(verdict, [named, drift], [], LEVEL, {})
     assert verdict["summary"] == "explained by inertia_error" and not verdict["unexplained"], verdict
     assert verdict["rejected"]["scale_factor_drift[grs2.y]"].startswith("a fluctuation") and not drift.accepted
-    drift = _report("grs2.y", 15.2 - 11.0, 1.0, name="scale_factor_drift", expected_z=1.2)
+    drift = _report("grs2.y", 15.2 - 11.0, 1.0, name="scale_factor_drift", expected_z=1.2, heldout_z=2.0)
     verdict = _verdict(["scale_factor_drift"])
     _apply_naming_rule(verdict, [drift], [], LEVEL, {})
     assert verdict["summary"] == "no significant gap" and not verdict["unexplained"], verdict
