@@ -225,13 +225,14 @@ def standing_verdict(reports: Sequence[Any], unexplained: bool, families: Sequen
         if report.accepted:
             raised = unexplained and _beside_gap(report, gap_channels)
             reasons[report.key] = _reason(report, raised, level)
-            if reasons[report.key] is not None and _as_family(report, standing_families) is not report:
+            as_family = _as_family(report, standing_families)
+            if reasons[report.key] is not None and as_family is not report:
                 # a member its own check refuses stands where its standing family's check confirms the family
                 # (one of three members at 4-7 sigma falls short of z = 1 in several per cent of runs); a member
                 # that stands on its own keeps standing: a gravity gradient's badly extrapolated components
                 # brought its family's held-out z to 0, refusing its y component, which stands alone (blind seed
                 # 18, set 52)
-                reasons[report.key] = _reason(_as_family(report, standing_families), raised, level)
+                reasons[report.key] = _reason(as_family, raised, level)
     # the stacks of rule 3: variants of one physical family (one GRS's effect, family_group) that stand
     # on rules 1 and 2 (a variant the held-out data refuse, or one of the other GRS, is no part of it)
     stacked: dict[str, int] = {}
