@@ -45,7 +45,9 @@ def _table(seq: int, first_s: float = 200.0) -> bytes:
 
 
 def _deliver(onboard, frames, t_ns=ARRIVAL_NS):
+    """A burst of ``frames`` arriving at ``t_ns``, then the onboard clock reaching ``t_ns`` (the tick reads them)."""
     onboard._on_telecommands(lt.burst(list(frames), [t_ns] * len(frames), t_ns))
+    onboard._take_arrived(t_ns)
 
 
 def _refit(frame: bytes | bytearray) -> bytes:
@@ -211,6 +213,7 @@ def test_fuzzed_uplink_never_raises_and_never_schedules(context, keys):
             msg = lt.burst([data], [0], ARRIVAL_NS + _NS)
             msg.times_ns = times
             onboard._on_telecommands(msg)
+            onboard._take_arrived(ARRIVAL_NS + _NS)
         assert onboard.schedule.inserted == 120 and onboard._tables == 10 and onboard.verifier.accepted == 10
         new = _packets(onboard)[baseline:]
         assert new and all(is_frame_security_report(p) for p in new)  # no TM[1,x]: nothing was accepted
@@ -220,7 +223,8 @@ def test_fuzzed_uplink_never_raises_and_never_schedules(context, keys):
         onboard.destroy_node()
 
 
-def test_the_intruders_frames_are_all_refused_and_the_genuine_tables_fly(context, keys, tmp_path):
+@pytest.mark.parametrize("intruder_first", [False, True])
+def test_the_intruders_frames_are_all_refused_and_the_genuine_tables_fly(context, keys, tmp_path, intruder_first):
     """uplink_intruder against the executor, handlers called directly: every kind, every frame refused with the
     reason it was built for, the genuine tables scheduled as sent (the running graph: test/faults)."""
     from taiji2_runtime.packets.sdls_keys import KeyTable, SecurityAssociation
@@ -235,11 +239,14 @@ def test_the_intruders_frames_are_all_refused_and_the_genuine_tables_fly(context
     try:
         signer = FrameSigner(ground)  # SPI 2
         genuine = lt.burst([signer.sign(_table(0)), signer.sign(_table(1, 300.0))], [ARRIVAL_NS] * 2, ARRIVAL_NS)
-        onboard._on_telecommands(genuine)
         intruder._on_uplink(genuine)
         intruder._on_uplink(sent[0])  # its own burst comes back to it: it attacks once
         assert len(sent) == 1
-        onboard._on_telecommands(sent[0])
+        # the bursts in either order (two writers: DDS keeps no order between them): the frames are read in
+        # the order they arrive onboard, so a replay always comes after its genuine frame
+        for burst in ((sent[0], genuine) if intruder_first else (genuine, sent[0])):
+            onboard._on_telecommands(burst)
+        onboard._take_arrived(max(sent[0].times_ns))
         report = intruder.report()
         assert report["sent"] == {"forged": 3, "replay": 3, "bit_flip": 3, "revoked": 3, "garbage": 50}
         assert onboard.verifier.accepted == 2 and onboard.schedule.inserted == 24
@@ -247,6 +254,10 @@ def test_the_intruders_frames_are_all_refused_and_the_genuine_tables_fly(context
         for reason, n in report["expected_refusals"].items():
             if reason != "any":
                 assert onboard.verifier.refused[reason] >= n, (reason, dict(onboard.verifier.refused))
+        # the frame security reports in telemetry: times never go back and the latest counts every frame
+        reports = [decode_frame_security_report(p) for _, p in onboard._reports if is_frame_security_report(p)]
+        times = [t for _, t in reports]
+        assert times == sorted(times) and reports[-1][0].total() == 64, times
     finally:
         intruder.destroy_node()
         onboard.destroy_node()

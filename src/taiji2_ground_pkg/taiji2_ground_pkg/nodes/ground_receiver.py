@@ -130,9 +130,11 @@ class GroundReceiver(rclpy.node.Node):
             self._rx.rejected[f"report_{exc.kind}"] += 1
             return
         self._report_packets += 1
-        if self._frame_security is not None and onboard_ns <= self._frame_security["onboard_s"] * _NS:
-            return  # a duplicate or an older one played back late
-        self._frame_security = {"onboard_s": onboard_ns / _NS, "ground_s": receive_ns / _NS,
+        last = self._frame_security
+        if last is not None and (onboard_ns, fsr.total()) <= (last["onboard_ns"], last["total"]):
+            return  # a duplicate or an older one played back late (at one time: the counts only grow)
+        self._frame_security = {"onboard_s": onboard_ns / _NS, "onboard_ns": onboard_ns, "total": fsr.total(),
+                                "ground_s": receive_ns / _NS,
                                 "fsr": f"0x{fsr.fsr_word():08X}", "alarm": fsr.alarm, "last_spi": fsr.last_spi,
                                 "accepted": fsr.accepted, "refused": fsr.refused}
 

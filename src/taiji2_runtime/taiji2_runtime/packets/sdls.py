@@ -157,6 +157,10 @@ class FrameSecurityReport:
     accepted: int
     refused: dict[str, int] = field(default_factory=dict)
 
+    def total(self) -> int:
+        """Frames counted so far, accepted and refused (it only grows while the verifier runs)."""
+        return self.accepted + sum(self.refused.values())
+
     def fsr_word(self) -> int:
         """The 32-bit FSR: control word type 1, version 100, alarm, bad SN, bad MAC, bad SA, last SPI, SN LSB."""
         return ((1 << 31) | (0b100 << 28) | (self.alarm << 27) | (self.bad_sn << 26) | (self.bad_mac << 25)

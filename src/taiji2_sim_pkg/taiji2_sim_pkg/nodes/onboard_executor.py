@@ -1,7 +1,8 @@
 """onboard_executor (onboard): the time-based schedule of ECSS PUS service 11 and the maneuver it flies.
 
 Takes the TC transfer frames the uplink delivers (``/onboard/link/tc``; each frame with its onboard
-arrival time) and authenticates each before anything else reads it (SDLS,
+arrival time) and, once the onboard clock reaches a frame's arrival, in the order of arrival whatever the
+order the bursts came in, authenticates it before anything else reads it (SDLS,
 :class:`taiji2_runtime.packets.sdls.FrameVerifier` with the onboard key table ``key_file``): a refused
 frame (truncated, oversized, bad FECF or header, no or unknown or revoked SPI, bad MAC, replayed or
 out-of-window sequence number) is counted per reason on ``/diagnostics`` and in a frame security
@@ -24,6 +25,7 @@ a time cannot change afterwards. Parameters: ``config/onboard_executor.yaml``.
 
 from __future__ import annotations
 
+import heapq
 import json
 from collections.abc import Sequence
 from typing import Any
@@ -83,6 +85,9 @@ class OnboardExecutor(rclpy.node.Node):
         self.verifier = FrameVerifier(self._key_table(key_file), window=window, max_frame_octets=max_frame)
         self.schedule = OnboardSchedule(capacity, margin)
         self._horizon_ns = -1  # the uplink is complete through this onboard time
+        self._arrived: list[tuple[int, int, bytes]] = []  # heap (arrival [ns], n, frame) of frames not yet read
+        self._frames_in = 0
+        self._fsr_ns = -1  # the time of the last frame security report [ns]
         self._next_ns = 0
         self._reports: list[tuple[int, bytes]] = []
         self._report_seq = 0
@@ -115,6 +120,10 @@ class OnboardExecutor(rclpy.node.Node):
         return table
 
     def _on_telecommands(self, msg: Any) -> None:
+        """Hold each frame of a burst until the onboard time reaches its arrival (:meth:`_take_arrived`).
+
+        Bursts reach this node in DDS order, which across writers (the link, an intruder's transmitter) is
+        not the order the frames reach the spacecraft; a frame is read in the order of its arrival time."""
         try:
             frames = split_frames(bytes(msg.data))
             if len(frames) != len(msg.times_ns):
@@ -122,23 +131,34 @@ class OnboardExecutor(rclpy.node.Node):
         except FrameError as exc:  # nothing of a burst that does not divide into its frames is read
             self.verifier.count_refused(exc.kind)
             self.get_logger().warn(f"telecommand burst refused: {exc}", throttle_duration_sec=10.0)
-            now_ns = self.get_clock().now().nanoseconds
-            self._report(encode_frame_security_report(self.verifier.report(), now_ns, self._report_seq), now_ns)
+            self._report_frame_security(self.get_clock().now().nanoseconds)
             return
-        refused_at = -1
         for frame, arrival_ns in zip(frames, msg.times_ns, strict=True):
-            arrival_ns = int(arrival_ns)
+            self._frames_in += 1
+            heapq.heappush(self._arrived, (int(arrival_ns), self._frames_in, frame))
+        self._horizon_ns = max(self._horizon_ns, lt.stamp_ns(msg.header))
+
+    def _take_arrived(self, through_ns: int) -> None:
+        """Authenticate and execute, in arrival order, every held frame that has arrived by ``through_ns``."""
+        refused_at = -1
+        while self._arrived and self._arrived[0][0] <= through_ns:
+            arrival_ns, _, frame = heapq.heappop(self._arrived)
             try:
                 packet = self.verifier.verify(frame)
             except FrameRefused as exc:
-                refused_at = max(refused_at, arrival_ns)
+                refused_at = arrival_ns
                 self.get_logger().warn(f"telecommand frame refused: {exc}", throttle_duration_sec=10.0)
                 continue
             self._on_packet(packet, arrival_ns)
         if refused_at >= 0:
-            self._report(encode_frame_security_report(self.verifier.report(), refused_at, self._report_seq),
-                         refused_at)
-        self._horizon_ns = max(self._horizon_ns, lt.stamp_ns(msg.header))
+            self._report_frame_security(refused_at)
+
+    def _report_frame_security(self, t_ns: int) -> None:
+        """A TM[3,25] of the counts now, stamped ``t_ns`` or, if later, the previous one's time: the counts
+        are cumulative and the ground keeps the latest report."""
+        self._fsr_ns = max(self._fsr_ns, t_ns)
+        self._report(encode_frame_security_report(self.verifier.report(), self._fsr_ns, self._report_seq),
+                     self._fsr_ns)
 
     def _on_packet(self, packet: bytes, arrival_ns: int) -> None:
         """One authenticated telecommand packet, arrived onboard at ``arrival_ns``."""
@@ -181,6 +201,7 @@ class OnboardExecutor(rclpy.node.Node):
         if self._horizon_ns < 0:
             return  # nothing known of the uplink yet: commanding now could be contradicted later
         until = min(self.get_clock().now().nanoseconds + self._lookahead_ns, self._horizon_ns)
+        self._take_arrived(until)
         published = -1
         while self._next_ns <= until:
             torque = self.schedule.torque_at(self._next_ns / _NS)
