@@ -290,7 +290,8 @@ class UplinkIntake:
     def check(self, octets: bytes, times: int, budget: Budget) -> None:
         before, accepted, scheduled = self.counted(), self.node.verifier.accepted, self.node.schedule.inserted
         msg = lt.burst([octets], [10 * _NS] * max(times, 0), 10 * _NS)
-        budget.run(lambda: self.node._on_telecommands(msg))
+        # the burst, then the onboard clock reaching its arrival (the tick reads the frames held)
+        budget.run(lambda: (self.node._on_telecommands(msg), self.node._take_arrived(10 * _NS)))
         budget.check(len(octets))
         try:
             frames = split_frames(octets)

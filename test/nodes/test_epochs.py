@@ -41,6 +41,59 @@ def test_a_stream_silent_while_another_delivered_max_lag_stops_holding_epochs_ba
     assert a.refused == {"grs2": {"out_of_order_stamp": 1}}
 
 
+class _Clock:
+    """A clock the test moves by hand [s]."""
+
+    def __init__(self) -> None:
+        self.now_s = 0.0
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+def test_a_reader_starved_while_the_others_deliver_batch_after_batch_is_not_taken_for_stopped_before_its_silence():
+    """A lost datagram of one topic, repaired later: the other readers deliver two take batches (128 messages)
+    meanwhile. With min_silence_s its 64 late samples still go into their epochs; once it has also been silent
+    that long on the clock it has stopped, and release_stopped frees the epochs without it."""
+    clock = _Clock()
+    a = EpochAssembler(STREAMS, max_lag_s=10.0, min_silence_s=2.0, clock=clock)  # 100 messages
+    out = []
+    for k in range(10):  # in step
+        for s in STREAMS:
+            out += a.add(s, k * DT, k)
+    for k in range(10, 138):  # grs2's reader has nothing: 128 messages of the others, 0.5 s of the clock
+        clock.now_s += 0.5 / 128
+        out += a.add("star_tracker", k * DT, k)
+        out += a.add("grs1", k * DT, k)
+    assert [e.t_ns for e in out] == [k * DT for k in range(10)]
+    for k in range(10, 74):  # grs2's repaired batch of 64
+        out += a.add("grs2", k * DT, k)
+    assert [e.t_ns for e in out] == [k * DT for k in range(74)]
+    assert all(len(e.samples) == 3 for e in out) and a.refused == {}
+    # then grs2 stops for good while the others go on: held while its silence is shorter than 2 s (however many
+    # messages the others deliver meanwhile), released once it is not
+    for k in range(138, 400):
+        out += a.add("star_tracker", k * DT, k)
+        out += a.add("grs1", k * DT, k)
+    clock.now_s += 1.9
+    assert len(out) == 74 and a.release_stopped() == []
+    clock.now_s += 0.2
+    later = a.release_stopped()
+    assert [e.t_ns for e in later] == [k * DT for k in range(74, 400)]
+    assert all("grs2" not in e.samples for e in later)
+    # without min_silence_s the message count alone decided: the same starved reader lost its batch
+    b = EpochAssembler(STREAMS, max_lag_s=10.0)
+    for k in range(10):
+        for s in STREAMS:
+            b.add(s, k * DT, k)
+    for k in range(10, 138):
+        b.add("star_tracker", k * DT, k)
+        b.add("grs1", k * DT, k)
+    for k in range(10, 74):
+        b.add("grs2", k * DT, k)
+    assert b.refused == {"grs2": {"out_of_order_stamp": 64}}
+
+
 def test_a_stream_silent_before_its_slot_is_known_holds_epochs_back_until_it_stopped():
     """A stream's first samples wait for its slot (SLOT_SAMPLES of them, or until it stopped)."""
     a = EpochAssembler(STREAMS, max_lag_s=2.0)

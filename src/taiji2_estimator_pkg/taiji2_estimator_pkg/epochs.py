@@ -43,14 +43,20 @@ stops holding epochs back once, since its last message, another stream has deliv
 worth of samples (``max_lag_s`` times the sample rate, counted in messages). Until its slot is known
 (its first :data:`SLOT_SAMPLES` samples, or it stopped) a stream's samples wait, and so do the epochs.
 
-Every decision here is a function of the messages received and their order, never of wall time or of
+Which epochs a stream holds back is a function of the messages received and their order, never of
 how far apart stamps are: a stream whose messages are merely late (its publisher starved of CPU, a
 slow transport, a reader drained in batches) keeps delivering between the others' messages and holds
 the epochs back however long it takes, so the epochs released - hence the estimate - are the same on
 an idle and on a busy machine. The order of messages *across* readers is that of the executor's round
-robin (at most one take batch, 64 messages, of one reader in a row), so ``max_lag_s`` must exceed that.
-Only ``max_pending`` (memory) and :meth:`EpochAssembler.flush` (end of data) release an epoch
-otherwise.
+robin (at most one take batch, 64 messages, of one reader in a row) only while every reader has
+messages waiting: when one topic's datagrams are lost and repaired (a busy receiver's socket buffer
+overflowing in a burst), the other readers deliver batch after batch meanwhile, and two batches (128
+messages) had GRS2 taken for stopped and its next 64 samples refused as out of order (a link run in
+the CI beside two CPU-bound processes). So a node also gives ``min_silence_s``: a stream counts as
+stopped only once it has, besides, been silent that long on the wall clock. Wall time can thus only
+delay the decision that a stream stopped, never make it: a stream that did stop has no samples left
+to deliver, so the epochs are the same whenever they go. Only ``max_pending`` (memory) and
+:meth:`EpochAssembler.flush` (end of data) release an epoch otherwise.
 
 Where streaming and bulk differ
 -------------------------------
@@ -66,7 +72,8 @@ new segment there. Plain Python and numpy: no middleware.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -309,15 +316,27 @@ class EpochAssembler:
         At most this many epochs wait; the oldest is released beyond it.
     reference : sequence of str
         Streams whose first stamp is the grid's origin (default both GRS, those of them in ``streams``).
+    min_silence_s : float
+        A stream counts as stopped only once it has also been silent this long on ``clock`` [s] (0: the
+        message count alone decides). Poll :meth:`release_stopped` for the epochs that frees.
+    clock : callable
+        Seconds on a monotonic clock (default :func:`time.monotonic`).
     """
 
     def __init__(self, streams: Sequence[str], max_lag_s: float, sample_period_s: float = 0.1,
-                 max_pending: int = 200_000, reference: Sequence[str] = DEFAULT_REFERENCE) -> None:
+                 max_pending: int = 200_000, reference: Sequence[str] = DEFAULT_REFERENCE, *,
+                 min_silence_s: float = 0.0, clock: Callable[[], float] = time.monotonic) -> None:
         if not max_lag_s > 0:
             raise ValueError(f"max_lag_s: must be > 0 s, got {max_lag_s!r}")
         if not sample_period_s > 0:
             raise ValueError(f"sample_period_s: must be > 0 s, got {sample_period_s!r}")
+        if not min_silence_s >= 0:
+            raise ValueError(f"min_silence_s: must be >= 0 s, got {min_silence_s!r}")
         self.streams = tuple(streams)
+        self.min_silence_s = float(min_silence_s)
+        self._clock = clock
+        #: clock time of each stream's last message (of the assembler's start before its first)
+        self._heard_s: dict[str, float] = {s: clock() for s in self.streams}
         self.reference = tuple(s for s in reference if s in self.streams) or self.streams
         self.period_ns = round(float(sample_period_s) * 1e9)
         self.max_lag_messages = max(round(float(max_lag_s) / float(sample_period_s)), 1)
@@ -355,6 +374,8 @@ class EpochAssembler:
             self.first_ns = t_ns
         self._received[stream] += 1
         self._received_at_last[stream] = dict(self._received)
+        if self.min_silence_s > 0:
+            self._heard_s[stream] = self._clock()
         if t_ns == self._latest[stream]:
             self._refuse(stream, "duplicate_stamp")
             return []
@@ -413,9 +434,17 @@ class EpochAssembler:
 
     # -- release --------------------------------------------------------------------------------
     def _is_dead(self, stream: str) -> bool:
-        """Nothing arrived from ``stream`` while another stream delivered ``max_lag_s`` worth of messages."""
+        """Nothing arrived from ``stream`` while another stream delivered ``max_lag_s`` worth of messages, nor for
+        ``min_silence_s`` of the clock."""
         at_last = self._received_at_last[stream]
-        return any(self._received[o] - at_last[o] >= self.max_lag_messages for o in self.streams)
+        if not any(self._received[o] - at_last[o] >= self.max_lag_messages for o in self.streams):
+            return False
+        return self.min_silence_s <= 0 or self._clock() - self._heard_s[stream] >= self.min_silence_s
+
+    def release_stopped(self) -> list[Epoch]:
+        """The epochs that wait only for streams which have since been silent for ``min_silence_s`` (poll it:
+        no message need come to make a stream's silence long enough), oldest first."""
+        return self._ready()
 
     def _holds(self, stream: str, j: int) -> bool:
         """Whether ``stream`` may still deliver a sample for epoch ``j``."""

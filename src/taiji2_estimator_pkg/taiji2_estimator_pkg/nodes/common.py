@@ -192,7 +192,8 @@ class EstimatorNode(rclpy.node.Node):
         self.p = declare_parameters(self, node_name)
         accept_runtime_parameters(self, self.p)
         self.instrument = instrument_from(self.p)
-        self.assembler = EpochAssembler(self.streams(), self.p["max_stream_lag_s"], self.instrument.dt_s)
+        self.assembler = EpochAssembler(self.streams(), self.p["max_stream_lag_s"], self.instrument.dt_s,
+                                        min_silence_s=self.p["max_stream_silence_s"])
         self.node_rejections = RejectionCounts()
         self.reported_rejections: dict[str, dict[str, int]] = {}
         self.last_data_wall = time.monotonic()
@@ -225,7 +226,10 @@ class EstimatorNode(rclpy.node.Node):
             self._process_epoch(epoch)
 
     def _end_of_data_tick(self) -> None:
-        # wall time decides only *when* the last estimate goes out, never which epochs it holds
+        # wall time decides only *when* an epoch goes on without a stopped stream and the last estimate goes
+        # out, never which samples the epochs hold
+        for epoch in self.assembler.release_stopped():
+            self._process_epoch(epoch)
         self._publish_at_end_of_data()
 
     def _process_epoch(self, epoch: Any) -> None:
