@@ -184,6 +184,34 @@ def test_the_counts_survive_a_checkpoint():
     assert b.missing() == a.missing() and b.missing()["star_tracker"] > 0
 
 
+def test_a_checkpoint_holds_the_pending_epochs_and_the_samples_waiting_for_their_slot(tmp_path):
+    """A node killed right after a checkpoint resumes from it: every sample the assembler had accepted is in it,
+    so the epochs after the restart are those of the uninterrupted run (before, pending epochs were left out and
+    their samples, sent again by a rerun, refused as out of order: lost)."""
+    from taiji2_estimator_pkg.checkpoint import load_checkpoint, save_checkpoint
+
+    def fed(a):
+        out = _feed(a, ("grs1", "grs2"), range(0, 12))
+        out += _feed(a, ("star_tracker",), range(0, 5))         # 5 samples: its slot unknown, they wait
+        return out + _feed(a, ("grs1",), range(12, 30))         # grs1 ahead: epochs 12.. pending
+
+    def rest(a):
+        return (_feed(a, ("star_tracker",), range(5, 40)) + _feed(a, ("grs2",), range(12, 40))
+                + _feed(a, ("grs1",), range(30, 40)))
+
+    whole = EpochAssembler(STREAMS, max_lag_s=20.0)
+    assert fed(whole) == [] and len(whole._pending) == 30
+    first = EpochAssembler(STREAMS, max_lag_s=20.0)
+    fed(first)
+    save_checkpoint(tmp_path / "c.json", {"assembler": first.state_dict()})
+    resumed = EpochAssembler(STREAMS, max_lag_s=20.0)
+    resumed.load_state_dict(load_checkpoint(tmp_path / "c.json")["assembler"])
+    after, uninterrupted = rest(resumed), rest(whole)
+    assert len(after) == 40
+    assert [(e.t_ns, e.samples, e.stamps) for e in after] == [(e.t_ns, e.samples, e.stamps) for e in uninterrupted]
+    assert resumed.refused == {} and resumed.missing() == whole.missing()
+
+
 def _feed(a, streams, stamps_k):
     out = []
     for k in stamps_k:

@@ -310,3 +310,34 @@ def test_a_run_ending_inside_a_publish_period_publishes_its_last_epoch(context, 
         # and G is that of the same publish period as the data, as offline, however the feed runs ahead of the
         # scale-factor estimator (the epochs wait for it; without the wait G lagged by up to 180 s here)
         assert g_ns // 10**9 == data_ns // 10**9, (data_ns, g_ns)
+
+
+def test_the_epochs_waiting_for_their_scale_factors_are_in_the_checkpoint(context, tmp_path):
+    """A c.m.-offset node killed while epochs wait for their scale factors (a restarted scale-factor estimator
+    catching up) resumes with them: they were released by the assembler, so a rerun's samples of them are
+    refused, and before they were in no checkpoint (the node's estimate then stalled for good)."""
+    from taiji2_estimator_pkg.epochs import Epoch
+
+    checkpoint = Path(tmp_path) / "co.json"
+    args = ["--ros-args", "-p", f"checkpoint_file:={checkpoint}"]
+    first = ComOffsetEstimatorNode(context=context, cli_args=args)
+    try:
+        first.waiting.through_ns = 0  # scale factors of the data through t = 0 s have come: later epochs wait
+        held = [Epoch(k * 100_000_000, {"grs1": np.full(6, 1e-3 * k), "grs2": np.full(6, -1e-3 * k)},
+                      {"grs1": k * 100_000_000, "grs2": k * 100_000_000}, index=k) for k in range(11, 31)]
+        for epoch in held:
+            first._process_epoch(epoch)
+        assert list(first.waiting.pending) == held and first.last_t_ns < 0  # none estimated yet
+        first.save_checkpoint(1_000_000_000)
+        killed = checkpoint.read_bytes()  # then SIGKILL: the checkpoint as it was (no shutdown, nothing flushed)
+    finally:
+        first.destroy_node()
+    checkpoint.write_bytes(killed)
+    second = ComOffsetEstimatorNode(context=context, cli_args=args)
+    try:
+        restored = list(second.waiting.pending)
+        assert [e.t_ns for e in restored] == [e.t_ns for e in held]
+        for a, b in zip(restored, held, strict=True):
+            assert a.stamps == b.stamps and all(np.array_equal(a.samples[s], b.samples[s]) for s in b.samples)
+    finally:
+        second.destroy_node()

@@ -22,6 +22,7 @@ from taiji2_estimator_pkg.core.com_offset.estimate import ComOffsetEstimate
 from taiji2_estimator_pkg.core.com_offset.gls import ComOffsetEstimator
 from taiji2_estimator_pkg.core.com_offset.paper import PaperComOffsetFilter
 from taiji2_estimator_pkg.core.parameters import com_offset_options, paper_com_offset_options
+from taiji2_estimator_pkg.epochs import Epoch
 from taiji2_estimator_pkg.nodes import common
 from taiji2_estimator_pkg.scale_factor_wait import ScaleFactorHistory, ScaleFactorWait
 from taiji2_model.contract import (
@@ -95,13 +96,18 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
 
     # -- checkpoints ---------------------------------------------------------------------------
     def _checkpoint_payload(self) -> dict[str, Any]:
-        return {"history": self.history} if self.paper else {"estimator": self.estimator.state_dict()}
+        # the epochs waiting for their scale factors are released by the assembler, not yet estimated: left out,
+        # they would be lost on a restart (the assembler refuses their samples when a rerun sends them again)
+        waiting = {"waiting": [epoch.state_dict() for epoch in self.waiting.pending]}
+        return {"history": self.history, **waiting} if self.paper else {"estimator": self.estimator.state_dict(),
+                                                                         **waiting}
 
     def _restore_payload(self, state: dict[str, Any]) -> None:
         if self.paper:
             self.history = [(t, q, v) for t, q, v in state["history"]]
         else:
             self.estimator.load_state_dict(state["estimator"])
+        self.waiting.pending.extend(Epoch.from_state_dict(e) for e in state.get("waiting", []))
 
     # -- input ---------------------------------------------------------------------------------
     def _on_scale_factors(self, msg: Any) -> None:
@@ -127,6 +133,7 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
         # estimated (or not yet determined) through this time: the epochs of its period may go on, with this G
         for epoch in self.waiting.scale_factors_through(t_ns, *self._wait_bounds_ns()):
             super()._process_epoch(epoch)
+        self._checkpoint_if_due()
 
     def _take_scale_factors(self, msgs: list[Any]) -> None:
         """G and its joint covariance from the pair of ScaleFactorEstimate messages of one stamp, once determined,
@@ -208,8 +215,6 @@ class ComOffsetEstimatorNode(common.EstimatorNode):
                                        throttle_duration_sec=10.0)
         if self._stamp_due(epoch.t_ns):
             self._publish(epoch.t_ns)
-        if self.checkpoint_due(epoch.t_ns):
-            self.save_checkpoint(epoch.t_ns)
 
     def _period_ns(self) -> int:
         return int((self.p["paper_batch_period_s"] if self.paper else self.p["publish_period_s"]) * 1e9)

@@ -224,12 +224,14 @@ class EstimatorNode(rclpy.node.Node):
                                    "are counted from here; samples published before this node subscribed are not)")
         for epoch in self.assembler.add(stream, t_ns, payload):
             self._process_epoch(epoch)
+        self._checkpoint_if_due()
 
     def _end_of_data_tick(self) -> None:
         # wall time decides only *when* an epoch goes on without a stopped stream and the last estimate goes
         # out, never which samples the epochs hold
         for epoch in self.assembler.release_stopped():
             self._process_epoch(epoch)
+        self._checkpoint_if_due()
         self._publish_at_end_of_data()
 
     def _process_epoch(self, epoch: Any) -> None:
@@ -297,6 +299,13 @@ class EstimatorNode(rclpy.node.Node):
             save_checkpoint(path, {"method": self.p["method"], "t_ns": t_ns, "assembler": self.assembler.state_dict(),
                                    "node_rejections": self.node_rejections.counts, **self._checkpoint_payload()})
             self.last_checkpoint_ns = t_ns
+
+    def _checkpoint_if_due(self) -> None:
+        """Save a checkpoint if one is due. Only between messages, never inside a batch of released epochs: the
+        assembler's state counts an epoch released once it leaves it, so a checkpoint taken in the middle of
+        a batch would lose the rest of the batch on a restart."""
+        if self.last_t_ns >= 0 and self.checkpoint_due(self.last_t_ns):
+            self.save_checkpoint(self.last_t_ns)
 
     def checkpoint_due(self, t_ns: int) -> bool:
         return self.last_checkpoint_ns < 0 or t_ns - self.last_checkpoint_ns >= self.p["checkpoint_period_s"] * 1e9

@@ -151,8 +151,6 @@ class ScaleFactorEstimatorNode(common.EstimatorNode):
         period_ns = int(self.p["publish_period_s"] * 1e9)
         if self.last_publish_ns < 0 or epoch.t_ns // period_ns > self.last_publish_ns // period_ns:
             self.publish_estimate(epoch.t_ns)
-        if self.checkpoint_due(epoch.t_ns):
-            self.save_checkpoint(epoch.t_ns)
 
     # -- output ----------------------------------------------------------------------------------
     def publish_estimate(self, t_ns: int) -> None:
