@@ -14,7 +14,9 @@ relinearised at its fitted magnitude, and
 its onset is modelled when the profile likelihood over the onset says it starts mid-run
 (:mod:`..onset`). At each step the leading variants are also tried from a few onsets on
 (:mod:`.late_start`): an effect that starts mid-run reads weak from the start, and drifts fit it
-better there than its own from-start signature.
+better there than its own from-start signature. Once a variant of a family starts mid-run, the family's
+other variants are scored from that onset as well (its gain the better of the two; no onset of their own
+to pay for: a family's effect starts at once, :func:`_family_onsets`).
 """
 
 from __future__ import annotations
