@@ -335,7 +335,7 @@ def impulse_scores(results: list[dict]) -> dict:
                  "clean_with_an_impulse": sum(bool(r["impulses"]) for r in clean) / max(len(clean), 1),
                  "other_sets_with_an_impulse": f"{sum(bool(r['impulses']) for r in others)}/{len(others)}",
                  "other_sets_impulses_max": max((len(r["impulses"]) for r in others), default=0)}
-    found, dt_err, z = {}, [], []
+    found, dt_err, z, z_time = {}, [], [], []
     for r in rows:
         spec = r["drawn"][0]["spec"]
         hits = [e for e in r["impulses"] if abs(e["time_s"] - spec["time_s"]) <= 0.2]
@@ -343,6 +343,7 @@ def impulse_scores(results: list[dict]) -> dict:
         found.setdefault(band, []).append(bool(hits))
         if hits:
             dt_err.append(hits[0]["time_s"] - spec["time_s"])
+            z_time.append(dt_err[-1] / hits[0]["time_sigma_s"])
             z += list((np.array(hits[0]["angular_momentum_n_m_s"]) - spec["angular_momentum_n_m_s"])
                       / np.array(hits[0]["angular_momentum_sigma_n_m_s"]))
     for band, hits in sorted(found.items()):
@@ -351,6 +352,7 @@ def impulse_scores(results: list[dict]) -> dict:
     out["impulse_found_snr>=8_fraction"] = float(np.mean(strong)) if strong else None
     out["impulse_time_error_max_s"] = float(np.max(np.abs(dt_err))) if dt_err else None
     out["impulse_L_z_std"] = float(np.std(z)) if len(z) > 1 else None
+    out["impulse_time_z_rms"] = float(np.sqrt(np.mean(np.square(z_time)))) if z_time else None
     out["impulse_explained"] = sum(not r["verdict"]["unexplained"] for r in rows)
     out["impulse_with_a_catalog_name"] = sum(bool(_physical(r["accepted"])) for r in rows)
     return out
