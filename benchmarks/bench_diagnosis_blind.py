@@ -39,7 +39,9 @@ Pairs are scored over all pairs and over the pairs whose two components are both
 component drawn at 4..5 sigma clears the floor with probability Phi(k - 3.8) (66 % at 4.2 sigma)
 for any test at this false-alarm rate, less once its partner is fitted beside it;
 ``two_both_found_expected_at_floor`` is the mean over the pairs of that product, what the draw
-alone allows.
+alone allows. A component drawn below k = 6 is one the held-out part cannot confirm, so it is named only above
+naming rule 2b's floor (delta chi2 18.0, 4.24 sigma; ``standing``): ``two_both_found_expected_at_naming_floor``
+is the same mean with Phi(k - 4.24), what the draw allows at the naming level.
 
 Usage::
 
@@ -79,6 +81,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):  # o
     os.environ.setdefault(_var, "1")
 
 import numpy as np  # noqa: E402
+from scipy.stats import chi2 as chi2_dist  # noqa: E402
 from dask.distributed import as_completed  # noqa: E402
 
 try:
@@ -90,6 +93,7 @@ from taiji2_apps.campaign.engine import open_cluster  # noqa: E402
 from taiji2_estimator_pkg.diagnosis.candidates import ONSET_KINDS, TIMING_FAMILIES  # noqa: E402
 from taiji2_estimator_pkg.diagnosis.model import NominalModel  # noqa: E402
 from taiji2_estimator_pkg.diagnosis.sensitivities import variant_sensitivities  # noqa: E402
+from taiji2_estimator_pkg.diagnosis.standing import unconfirmed_floor  # noqa: E402
 from taiji2_model.config import load_config  # noqa: E402
 from taiji2_model.effect_catalog import GravityGradient, make_effect  # noqa: E402
 from taiji2_model.effects import Effect  # noqa: E402
@@ -101,6 +105,10 @@ DETECTABLE_K = 6.0
 
 #: the selection's floor in sigmas (delta chi2 14.5: the Bonferroni gain floor over the catalog)
 FLOOR_K = 3.8
+
+#: the naming floor of an effect the held-out part cannot confirm (naming rule 2b, delta chi2 18.0 for one parameter:
+#: every component drawn below k = 6 is such an effect), in sigmas
+NAMING_FLOOR_K = math.sqrt(unconfirmed_floor(float(chi2_dist.sf(FLOOR_K ** 2, 1)), 1))
 
 PHYSICAL = tuple(f for f in FAMILIES if f not in TIMING_FAMILIES)
 
@@ -638,9 +646,10 @@ def score(results: list[dict], sigma_e: float) -> dict:
     # test at this false-alarm rate (less once its partner is fitted beside it), so a pair drawn near the floor
     # is missed by construction; the pairs with both components detectable (k >= 6, as for single sets) are
     # scored apart
-    table["two_both_found_expected_at_floor"] = float(np.mean([
-        np.prod([0.5 * (1.0 + math.erf((d["k"] - FLOOR_K) / math.sqrt(2.0))) for d in r["drawn"]]) for r in two
-    ])) if two else None
+    for label, floor_k in (("floor", FLOOR_K), ("naming_floor", NAMING_FLOOR_K)):
+        table[f"two_both_found_expected_at_{label}"] = float(np.mean([
+            np.prod([0.5 * (1.0 + math.erf((d["k"] - floor_k) / math.sqrt(2.0))) for d in r["drawn"]]) for r in two
+        ])) if two else None
     detectable_two = [r for r in two if all(d["k"] >= DETECTABLE_K for d in r["drawn"])]
     table["two_detectable_sets"] = len(detectable_two)
     pair_scores("two_detectable", detectable_two)
