@@ -81,8 +81,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):  # o
     os.environ.setdefault(_var, "1")
 
 import numpy as np  # noqa: E402
-from scipy.stats import chi2 as chi2_dist  # noqa: E402
 from dask.distributed import as_completed  # noqa: E402
+from scipy.stats import chi2 as chi2_dist  # noqa: E402
 
 try:
     from taiji2_estimator_pkg.diagnosis import FAMILIES, DiagnosisOptions, candidate_catalog, diagnose, prepare_input
