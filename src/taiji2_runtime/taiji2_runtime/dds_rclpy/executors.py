@@ -176,6 +176,7 @@ class Executor:
                 for msg in subscription.take(_TAKE_BATCH):
                     self._pending.append((subscription.callback, (msg,)))
             for service in list(node.services):
+                service.send_held()  # replies waiting for their client's reply reader (service.py)
                 for request in service.take(_TAKE_BATCH):
                     self._pending.append((service.answer, (request,)))
             for timer in list(node.timers):
