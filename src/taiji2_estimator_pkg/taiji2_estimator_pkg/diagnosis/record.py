@@ -570,6 +570,13 @@ def _series_columns(candidate: Candidate, ctx: CandidateContext, terms: Sequence
     return [c for j, c in enumerate(candidate.series(ctx)) if j in terms]
 
 
+#: with free effects, past this many iterations a re-fit whose update shrinks by less than
+#: :data:`SLOW_CONTRACTION` per iteration is stopped (it would not reach 0.05 sigma in the iterations left;
+#: it is then withheld as not converged, as at its last iteration)
+SLOW_AFTER = 8
+SLOW_CONTRACTION = 0.8
+
+
 def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings, iterations: int,
               progress: Callable[[str], None],
               fixed: Sequence[tuple] = (), t_mid_s: float | None = None,
@@ -586,9 +593,10 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
     ``info`` (if given) receives ``"cov"``, the (12, 12) covariance of (relative G, d) of the last
     iteration, ``"chi2"``, ``"dof"``, ``"last_update_sigma"`` (the last iteration's largest update in
     sigmas: the fit has not converged where it is large; with ``free``, a fit whose updates grow twice in a
-    row past its third iteration stops there), ``"iterations"`` (those run) and, with ``free``, ``"free_values"`` (the
-    re-fitted values, one array per entry), ``"free_sigma"`` and ``"beyond_series_bound"`` (the free
-    effects whose value left the range where their series form holds).
+    row past its third iteration stops there, and one whose update shrinks by less than a factor
+    :data:`SLOW_CONTRACTION` past :data:`SLOW_AFTER` iterations), ``"iterations"`` (those run) and, with
+    ``free``, ``"free_values"`` (the re-fitted values, one array per entry), ``"free_sigma"`` and
+    ``"beyond_series_bound"`` (the free effects whose value left the range where their series form holds).
 
     Returns
     -------
@@ -664,6 +672,9 @@ def calibrate(inp: DiagnosisInput, model: NominalModel, settings: RecordSettings
         if change < 0.05:
             break
         updates.append(change)
+        if free and len(updates) >= SLOW_AFTER and updates[-1] > SLOW_CONTRACTION * updates[-2]:
+            progress(f"calibration iteration {iteration + 1}: the updates shrink too slowly; stopped")
+            break
         if free and len(updates) >= 4 and updates[-1] > updates[-2] > updates[-3]:
             # a re-fit whose updates grow twice in a row past its third iteration is not converging (an
             # alias swapped in that oscillates against a nonlinearity: 0.35, 0.73, 1.1, 1.7, 1.4, 0.58 sigma):
