@@ -10,6 +10,8 @@ result types of :mod:`.results`:
    channel, band and time segment (:class:`.stages.where.Where`).
 3. *Selection* (:mod:`.stages.selection`): forward selection of candidate variants by BIC score
    over a Bonferroni gain floor, with onsets (:class:`.stages.selection.Selection`).
+   Where the selected effects moved G or d far from the record's point (a large effect), the record is
+   rebuilt at the selected model's G and d and the selection runs again (:mod:`.stages.relinearize`).
 4. *Final scan* (:mod:`.stages.final_scan`): the final joint fit, its residual scanned, the
    verdict explained / unexplained (:class:`.stages.final_scan.FinalModel`).
 5. *How far* (:mod:`.stages.how_far`): each effect's report (magnitude, shrink, G and d shifts,
@@ -47,6 +49,7 @@ from taiji2_estimator_pkg.diagnosis.stages.nominal import (
     with_stamp_phases,
 )
 from taiji2_estimator_pkg.diagnosis.stages.plots import plot_data
+from taiji2_estimator_pkg.diagnosis.stages.relinearize import relinearize
 from taiji2_estimator_pkg.diagnosis.stages.selection import select_effects
 from taiji2_estimator_pkg.diagnosis.stages.where import locate
 from taiji2_model.config import SimConfig
@@ -95,6 +98,11 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
     lap("locations")
     selection = select_effects(calibrated, options, say)
     lap("selection")
+    relinearized = relinearize(inp, calibrated, selection, options, say)
+    if relinearized is not None:  # a large effect: selected again on a record built at its model's G and d
+        calibrated, relinearized_info = relinearized
+        selection = select_effects(calibrated, options, say)
+        lap("relinearized selection")
     final = final_scan(inp, calibrated, where, selection, options, say)
     lap("final scan")
     spots = blind_spots(calibrated.full, calibrated.candidates, final.current, calibrated.floor, calibrated.log_n)
@@ -110,6 +118,8 @@ def diagnose(inp: DiagnosisInput, nominal: NominalModel | SimConfig, options: Di
 
     result.calibration = {**calibrated.calibration, "readout_response": where.readout_response,
                           "readout_response_final": final.readout_response}
+    if relinearized is not None:
+        result.calibration["relinearized"] = relinearized_info
     result.locations, result.location_tests = where.before.locations, where.before.tests
     result.location_threshold, result.locations_after = where.before.threshold, final.after.locations
     result.steps, result.effects, result.verdict, result.how_far = selection.steps, reports, verdict, how_far.how_far

@@ -3,6 +3,7 @@
 - :mod:`.nominal`: admit the data; calibrate G and d; the candidate record and the nominal fit.
 - :mod:`.where`: scan the residual for significant locations (also the final scan's scan).
 - :mod:`.selection`: forward selection of the candidate variants (which), with onsets.
+- :mod:`.relinearize`: after a large effect, the record rebuilt at its model's G and d and the selection rerun.
 - :mod:`.final_scan`: the final joint fit, its scan and the verdict.
 - :mod:`.how_far`: the effect reports (shrink, G and d shifts, aliases: :mod:`.aliases`), the gap before and after.
 - :mod:`.held_out`: fit on the first part of the run, apply to the rest.
