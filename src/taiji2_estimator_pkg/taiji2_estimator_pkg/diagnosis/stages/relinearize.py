@@ -51,4 +51,6 @@ def relinearize(inp: DiagnosisInput, nominal: Nominal, selection: Selection, opt
     # one build at that point (no re-centring on the nuisance fit, which would move it back to the biased point)
     rebuilt = fit_nominal(inp, replace(nominal.start, g=g, d=d), replace(options, calibration_iterations=1), say)
     info = {"moved_sigma": moved, "first_pass_accepted": [c.key for c in selection.accepted]}
-    return replace(rebuilt, calibration=nominal.calibration), info
+    # the point the record was built at (fit_nominal's check moves its g and d on towards the nuisance fit's,
+    # which the held-out records, built at Nominal.g and .d, must not follow)
+    return replace(rebuilt, g=g, d=d, calibration=nominal.calibration), info
